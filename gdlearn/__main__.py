@@ -1,0 +1,3 @@
+from gdlearn.cli import main
+
+raise SystemExit(main())
