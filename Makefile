@@ -17,7 +17,7 @@ install: $(STAMP)
 
 book: $(STAMP)
 	$(PY) -m gdlearn render scenes/cornell-box.xml --integrator pt --spp 64 --out _build/cornell-box.png
-	$(PY) -m gdlearn.book build
+	$(PY) scripts/build_book.py
 
 test: $(STAMP)
 	$(PY) -m pytest
