@@ -1,0 +1,18 @@
+"""Experiments: what accuracy costs in time (issue 5; book chapter "What accuracy costs").
+
+* :mod:`.metrics`     relMSE exactly as the papers define it, MSE, trimmed relMSE, slopes;
+* :mod:`.progressive` the runner: time or pass budgets, geometric snapshots, per-stage timing;
+* :mod:`.solvers`     frames -> final images through :mod:`gdlearn.reconstruct` by solver name;
+* :mod:`.study`       equal-time studies: methods x scenes x seeds -> tidy records;
+* :mod:`.references`  cached long-run references, Mitsuba 3 references, their noise floor;
+* :mod:`.executors`   serial, local process pool, Dask distributed;
+* :mod:`.plots`       convergence plots, image grids, error maps, stage bars, ratios;
+* :mod:`.toy`         toy estimators of an analytic image (exact answer known), for teaching.
+"""
+from .metrics import loglog_slope, mse, relmse, relmse_floor, relmse_map, relmse_trimmed, time_to_reach
+from .progressive import Run, Snapshot, pass_schedule, run, time_schedule
+from .study import Method, Study, Task, equal_time, run_task
+
+__all__ = ["relmse", "relmse_map", "relmse_trimmed", "relmse_floor", "mse", "loglog_slope",
+           "time_to_reach", "run", "Run", "Snapshot", "pass_schedule", "time_schedule", "Method",
+           "Study", "Task", "equal_time", "run_task"]

@@ -1,0 +1,171 @@
+"""Reference images for error measurement: long runs cached on disk, Mitsuba 3 renders, files.
+
+A convergence plot is only as good as its reference. The papers render theirs with a trusted
+estimator for much longer than the compared runs (seed 000 §6: "The reference images are rendered
+using BRE with a ..."). gdlearn does the same, and keeps the reference's own noise in view:
+
+* :func:`render_reference` -- a long run of a gdlearn estimator (default ``pt``), cached in
+  ``$GDLEARN_CACHE/references`` (default ``~/.cache/gdlearn/references``) under a key made of the
+  scene's *content* (the file and every file it references), the estimator, spp, seed, options and
+  gdlearn's version: editing the scene or upgrading gdlearn never reuses a stale image.
+* :func:`mitsuba_reference` -- Mitsuba 3 renders over several seeds (via
+  :func:`gdlearn.refs.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
+* :func:`load_reference` -- an image file (``.npz`` from this cache, ``.npy``, ``.exr``).
+
+Every :class:`Reference` carries a per-pixel variance estimate when one is known (the two
+half-buffers of a gdlearn frame; the spread over Mitsuba seeds) and its :attr:`Reference.floor`:
+the relMSE a *perfect* image would show against it (:func:`gdlearn.experiments.metrics.relmse_floor`).
+Curves flatten there, whatever the method; plots draw it as a line.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import metrics
+
+#: Bump when the cached file layout or the meaning of a key changes.
+CACHE_FORMAT = 1
+
+
+@dataclass
+class Reference:
+    image: np.ndarray                        # H x W x 3, linear RGB
+    variance: np.ndarray | None = None       # per-pixel variance of ``image`` (None if unknown)
+    spp: int | None = None
+    estimator: str = "file"
+    key: str = ""
+    path: Path | None = None
+
+    @property
+    def floor(self) -> float:
+        """Expected relMSE of a perfect image against this reference (NaN if the noise is unknown)."""
+        if self.variance is None:
+            return float("nan")
+        return metrics.relmse_floor(self.variance, self.image)
+
+    def save(self, path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = json.dumps({"spp": self.spp, "estimator": self.estimator, "key": self.key,
+                           "format": CACHE_FORMAT})
+        arrays = {"image": self.image, "meta": np.array(meta)}
+        if self.variance is not None:
+            arrays["variance"] = self.variance
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp, **arrays)
+        os.replace(tmp, path)                # atomic: a concurrent reader never sees half a file
+        self.path = path
+        return path
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("GDLEARN_CACHE") or Path.home() / ".cache" / "gdlearn"
+    return Path(root) / "references"
+
+
+def scene_digest(scene) -> str:
+    """SHA-256 of a scene's content: a file and the files its ``filename="..."`` attributes name
+    (meshes, textures), or the ``repr`` of a scene object (e.g. a toy scene dataclass)."""
+    h = hashlib.sha256()
+    if isinstance(scene, (str, Path)):
+        path = Path(scene)
+        data = path.read_bytes()
+        h.update(data)
+        for name in sorted(set(re.findall(rb'filename\s*=\s*"([^"]+)"', data))):
+            dep = path.parent / name.decode()
+            h.update(name)
+            h.update(dep.read_bytes() if dep.is_file() else b"<missing>")
+    else:
+        h.update(repr(scene).encode())
+    return h.hexdigest()
+
+
+def cache_key(scene, estimator, spp: int, seed: int, **options) -> str:
+    from gdlearn import __version__
+    parts = {"scene": scene_digest(scene), "estimator": str(estimator), "spp": int(spp),
+             "seed": int(seed), "options": sorted((k, repr(v)) for k, v in options.items()),
+             "version": __version__, "format": CACHE_FORMAT}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def load_reference(path) -> Reference:
+    """Read a reference image: ``.npz`` (this cache's format), ``.npy`` or ``.exr``."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"reference file {path} does not exist; render one with "
+                                "gdlearn.experiments.references.render_reference or pass another file")
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        with np.load(path) as z:
+            meta = json.loads(str(z["meta"])) if "meta" in z else {}
+            var = z["variance"] if "variance" in z else None
+            return Reference(z["image"], var, meta.get("spp"), meta.get("estimator", "file"),
+                             meta.get("key", ""), path)
+    if suffix == ".npy":
+        return Reference(np.load(path).astype(np.float64), path=path)
+    if suffix == ".exr":
+        return Reference(_read_exr(path), path=path)
+    raise ValueError(f"cannot read reference {path}: use a .npz, .npy or .exr file")
+
+
+def _read_exr(path) -> np.ndarray:
+    import OpenEXR
+    with OpenEXR.File(str(path)) as f:
+        ch = f.channels()
+        if "RGB" in ch:
+            img = ch["RGB"].pixels
+        elif all(c in ch for c in "RGB"):
+            img = np.stack([ch[c].pixels for c in "RGB"], axis=-1)
+        else:
+            raise ValueError(f"{path}: no R, G, B channels (found {', '.join(ch)})")
+    return np.asarray(img, dtype=np.float64)[..., :3]
+
+
+def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_003,
+                     spp_per_pass: int = 16, cache: bool = True, **options) -> Reference:
+    """A long run of a gdlearn estimator, cached on disk (see the module docstring).
+
+    The default seed is far from the small seeds studies use, so the reference is independent of
+    the runs it judges (sharing random numbers would correlate their errors and hide them).
+    """
+    from .study import load_scene, make_integrator
+    from gdlearn.integrators.base import render
+
+    key = cache_key(scene, estimator, spp, seed, spp_per_pass=spp_per_pass, **options)
+    path = cache_dir() / f"{key}.npz"
+    if cache and path.is_file():
+        return load_reference(path)
+    integ = make_integrator(estimator, load_scene(scene), seed, spp_per_pass, **options)
+    frame = render(integ, spp=spp)
+    ref = Reference(frame.primal, frame.variance(), frame.spp, getattr(integ, "name", str(estimator)),
+                    key)
+    if cache:
+        ref.save(path)
+    return ref
+
+
+def mitsuba_reference(path, spp: int = 1024, seeds=(101, 102, 103, 104), variant: str = "scalar_rgb",
+                      cache: bool = True, **defaults) -> Reference:
+    """Mitsuba 3's mean over ``seeds`` (``spp // len(seeds)`` each) with its variance (the squared
+    standard error over seeds), cached like :func:`render_reference`. ``defaults`` override the
+    file's ``<default>`` parameters (``res=64``, ``max_depth=8``)."""
+    from gdlearn.refs.mitsuba import mitsuba_mean_stderr
+
+    seeds = list(seeds)
+    per = max(1, spp // len(seeds))
+    key = cache_key(path, f"mitsuba:{variant}", per * len(seeds), seeds[0], seeds=seeds, **defaults)
+    out = cache_dir() / f"{key}.npz"
+    if cache and out.is_file():
+        return load_reference(out)
+    mean, stderr = mitsuba_mean_stderr(path, per, seeds, variant, **defaults)
+    ref = Reference(mean, stderr ** 2, per * len(seeds), f"mitsuba:{variant}", key)
+    if cache:
+        ref.save(out)
+    return ref
