@@ -51,7 +51,7 @@ def convergence(study, scene=None, metric: str = "relmse", ax=None, floor: bool 
             ax.loglog([r["seconds"] for r in cur], [r[metric] for r in cur], "o-", color=c, ms=3,
                       lw=1.2, alpha=1.0 if j == 0 else 0.4, label=label if j == 0 else None)
         floors += [r["relmse_floor"] for r in rs if np.isfinite(r.get("relmse_floor", np.nan))]
-    if floor and floors and metric.startswith("relmse"):
+    if floor and floors and metric.startswith("relmse") and np.mean(floors) > 0:
         ax.axhline(float(np.mean(floors)), color="k", ls="--", lw=1,
                    label="reference noise floor")
     ax.set_xlabel("time (s, JIT compile excluded)")
