@@ -1,0 +1,48 @@
+"""Cached references: keys follow scene content, the cache is reused, files load back."""
+import numpy as np
+import pytest
+
+from gdlearn.experiments import references as R
+from gdlearn.experiments.toy import ToyScene
+
+
+def test_key_follows_scene_content(tmp_path):
+    (tmp_path / "m.obj").write_text("v 0 0 0\n")
+    scene = tmp_path / "s.xml"
+    scene.write_text('<scene><shape type="obj"><string name="filename" value="x"/></shape>'
+                     '<shape type="obj" filename="m.obj"/></scene>')
+    k1 = R.cache_key(scene, "pt", 64, 1)
+    assert R.cache_key(scene, "pt", 64, 1) == k1
+    assert R.cache_key(scene, "pt", 128, 1) != k1 and R.cache_key(scene, "gpt", 64, 1) != k1
+    (tmp_path / "m.obj").write_text("v 0 0 1\n")       # a referenced mesh changed
+    assert R.cache_key(scene, "pt", 64, 1) != k1
+
+
+def test_render_reference_is_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
+    sc = ToyScene(10, 6)
+    est = "gdlearn.experiments.toy:ToyPrimal"
+    a = R.render_reference(sc, est, spp=64, spp_per_pass=8)
+    assert a.spp == 64 and a.variance is not None and np.isfinite(a.floor) and a.floor > 0
+    files = list((tmp_path / "references").glob("*.npz"))
+    assert len(files) == 1
+    b = R.render_reference(sc, est, spp=64, spp_per_pass=8)
+    assert b.path == files[0]
+    np.testing.assert_array_equal(a.image, b.image)
+    assert b.floor == pytest.approx(a.floor)
+    # the reference judges the estimate with error ~ its floor: more spp, lower floor (~1/spp)
+    c = R.render_reference(sc, est, spp=256, spp_per_pass=8)
+    assert c.floor < a.floor
+
+
+def test_load_reference_formats(tmp_path):
+    img = np.arange(24, dtype=float).reshape(2, 4, 3)
+    np.save(tmp_path / "r.npy", img)
+    r = R.load_reference(tmp_path / "r.npy")
+    np.testing.assert_array_equal(r.image, img)
+    assert np.isnan(r.floor)                           # unknown noise: no floor drawn
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        R.load_reference(tmp_path / "missing.exr")
+    with pytest.raises(ValueError, match="npz"):
+        (tmp_path / "r.png").write_bytes(b"x")
+        R.load_reference(tmp_path / "r.png")

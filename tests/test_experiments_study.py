@@ -1,0 +1,100 @@
+"""Equal-time studies: tidy records, identical results on every executor (serial, local process
+pool, Dask LocalCluster), ratios and time-to-reach, CSV, the compare command."""
+import argparse
+import csv
+
+import numpy as np
+import pytest
+
+from experiments_fake import FakeGradient, FakePrimal, fake_solver, truth
+from gdlearn.experiments import study as S
+from gdlearn.experiments.executors import DaskExecutor, get_executor, LocalExecutor, SerialExecutor
+
+# Columns that depend only on seeds and pass counts (not on the wall clock).
+DETERMINISTIC = ("method", "estimator", "scene", "seed", "snapshot", "passes", "spp", "relmse",
+                 "relmse_trimmed", "mse", "relmse_primal", "solver")
+
+
+def _study(executor):
+    methods = [FakePrimal, S.Method("fgpt", FakeGradient, fake_solver)]
+    return S.equal_time(methods, [None], passes=12, seeds=[0, 1], count=4,
+                        references={"none": truth()}, executor=executor)
+
+
+def _table(study):
+    return [tuple(r.get(k) for k in DETERMINISTIC) for r in study.records]
+
+
+@pytest.fixture(scope="module")
+def serial():
+    return _study("serial")
+
+
+def test_records_are_tidy(serial):
+    recs = serial.records
+    assert len(recs) == 2 * 2 * 4                     # methods x seeds x snapshots
+    assert serial.methods() == ["fake-pt", "fgpt"] and serial.scenes() == ["none"]
+    assert {r["solver"] for r in recs if r["method"] == "fgpt"} == {"fake_solver"}
+    assert {r["solver"] for r in recs if r["method"] == "fake-pt"} == {None}
+    assert sum(r["final"] for r in recs) == 4
+    assert set(serial.images) == {(m, "none", s) for m in ("fake-pt", "fgpt") for s in (0, 1)}
+
+
+def test_local_process_pool_matches_serial(serial):
+    pooled = _study(LocalExecutor(max_workers=2))
+    assert _table(pooled) == _table(serial)
+    for k, img in serial.images.items():
+        np.testing.assert_array_equal(pooled.images[k], img)
+
+
+def test_dask_local_cluster_matches_serial(serial):
+    with DaskExecutor(n_workers=2) as ex:             # LocalCluster on 127.0.0.1, closed on exit
+        assert len(ex.client.scheduler_info()["workers"]) == 2
+        dask = _study(ex)
+    assert _table(dask) == _table(serial)
+    for k, img in serial.images.items():
+        np.testing.assert_array_equal(dask.images[k], img)
+
+
+def test_ratios_and_time_to_reach_on_hand_made_records():
+    recs = []
+    for m, scale in (("a", 1.0), ("b", 0.25)):         # b has 4x lower error at every time
+        for i, t in enumerate((1.0, 2.0, 4.0)):
+            recs.append({"method": m, "scene": "s", "seed": 0, "final": i == 2, "seconds": t,
+                         "relmse": scale / t})
+    st = S.Study(recs)
+    assert st.equal_time_ratios("a") == {("a", "s"): 1.0, ("b", "s"): 4.0}
+    ttr = st.time_to_reach(0.5)
+    assert ttr[("a", "s", 0)] == pytest.approx(2.0) and ttr[("b", "s", 0)] == pytest.approx(1.0)
+
+
+def test_csv_has_every_column(serial, tmp_path):
+    path = serial.to_csv(tmp_path / "r.csv")
+    rows = list(csv.DictReader(open(path)))
+    assert len(rows) == len(serial.records)
+    assert {"relmse", "seconds", "t_trace", "t_shift", "t_reconstruct"} <= set(rows[0])
+    assert float(rows[0]["relmse"]) == serial.records[0]["relmse"]
+
+
+def test_method_specs_and_executor_names():
+    m = S.Method.parse("gpt+l1")
+    assert (m.label, m.estimator, m.solver) == ("gpt+l1", "gpt", "l1")
+    assert S.Method.parse("gpt", solver="l2").label == "gpt+l2"
+    assert isinstance(get_executor("serial"), SerialExecutor)
+    assert get_executor("local:3").max_workers == 3
+    with pytest.raises(ValueError, match="unknown executor"):
+        get_executor("cloud")
+
+
+def test_compare_command_on_the_toy(tmp_path, capsys):
+    from gdlearn.commands import compare
+    p = argparse.ArgumentParser()
+    compare.add_parser(p.add_subparsers())
+    args = p.parse_args(["compare", "toy:12x8", "--methods", "toy-pt,toy-gpt", "--passes", "8",
+                         "--seeds", "2", "--snapshots", "3", "--executor", "serial",
+                         "--csv", str(tmp_path / "c.csv"), "--plot", str(tmp_path / "c.png")])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "toy-pt" in out and "toy-gpt" in out and "1.00x" in out
+    rows = list(csv.DictReader(open(tmp_path / "c.csv")))
+    assert len(rows) == 2 * 2 * 3 and (tmp_path / "c.png").stat().st_size > 10_000
