@@ -95,7 +95,8 @@ class _Loader:
 
     def _once(self, node, seen):
         if seen:
-            raise SceneError(self.path, node.line, f"a second <{node.tag}>", f"keep one <{node.tag}>")
+            raise SceneError(self.path, node.line, f"a second <{node.tag}>",
+                             f"a scene has at most one <{node.tag}>: remove the other")
 
     def _declare(self, node: Node):
         for child in node.children:
@@ -227,7 +228,8 @@ class _Loader:
                 bsdfs.append((self.build(n, "bsdf"), n))
             elif n.tag == "emitter":
                 if s.emitter is not None:
-                    raise SceneError(self.path, n.line, "a shape has two emitters", "keep one area emitter")
+                    raise SceneError(self.path, n.line, "a shape has two emitters",
+                                     "a shape carries at most one area emitter: remove the other")
                 s.emitter = plugins.build_emitter(self, n, in_shape=True)
             elif n.tag == "medium":
                 self._set_medium(s, n.attrs.get("name"), self.build(n, "medium"), n, where)
@@ -240,7 +242,8 @@ class _Loader:
             else:
                 bsdfs.append((self.resolve(r, "bsdf"), r))
         if len(bsdfs) > 1:
-            raise SceneError(self.path, bsdfs[1][1].line, "a shape has more than one bsdf", "keep one")
+            raise SceneError(self.path, bsdfs[1][1].line, "a shape has more than one bsdf",
+                             "a shape has exactly one bsdf: remove the others")
         s.bsdf = bsdfs[0][0] if bsdfs else BSDF()   # Mitsuba's default: diffuse, reflectance 0.5
 
     def _set_medium(self, s: Shape, name, medium, node, where):
@@ -248,7 +251,8 @@ class _Loader:
             raise SceneError(self.path, node.line, f"a medium inside {where} must be named interior or "
                              f"exterior (got {name!r})", f'write <ref name="interior" id="{medium.id}"/>')
         if getattr(s, name) is not None:
-            raise SceneError(self.path, node.line, f"{where} sets its {name} medium twice", "keep one")
+            raise SceneError(self.path, node.line, f"{where} sets its {name} medium twice",
+                             f"give the {name} medium once")
         setattr(s, name, medium)
 
     def _mesh(self, s: Shape, props, node, where):

@@ -172,7 +172,8 @@ def build_medium(ld, node) -> Medium:
     props.finish(("sigma_t", "albedo", "scale", "sample_emitters"))
     phases = [n for n in nested if n.tag == "phase"]
     if len(phases) > 1:
-        raise SceneError(ld.path, phases[1].line, "a medium has more than one <phase>", "keep one")
+        raise SceneError(ld.path, phases[1].line, "a medium has more than one <phase>",
+                         "a medium has one phase function: remove the others")
     if phases:
         ph = phases[0]
         m.phase = _type(ld, ph, "phase", ("isotropic", "hg"))
@@ -210,7 +211,7 @@ def build_emitter(ld, node, in_shape: bool) -> Emitter:
             if to_world is not None:
                 raise SceneError(ld.path, props.line("position"),
                                  "give either 'position' or a to_world transform, not both",
-                                 "keep one of them")
+                                 "keep one of them (position is a translation)")
             to_world = translate(pos)
         e.to_world = np.eye(4) if to_world is None else to_world
         e.position = e.to_world[:3, 3].copy()
