@@ -51,3 +51,24 @@ def test_override_cannot_hide_a_bad_value():
     with pytest.raises(SceneError) as info:
         load(path, g=1.0)
     assert "outside (-1, 1)" in info.value.message and info.value.line is not None
+
+
+def test_mutated_scene_never_raises_anything_but_scene_error(tmp_path):
+    """Delete each line of a shipped scene in turn, or garble its numbers: the loader either loads
+    or raises SceneError -- no other exception type (a traceback) may escape."""
+    src = open(os.path.join(os.path.dirname(HERE), "..", "scenes", "mesh.xml")).read().splitlines()
+    meshes = os.path.abspath(os.path.join(os.path.dirname(HERE), "..", "scenes", "meshes"))
+    src = [l.replace('value="meshes/', f'value="{meshes}/') for l in src]
+    variants = [src[:i] + src[i + 1:] for i in range(len(src))]
+    variants += [src[:i] + [src[i].replace('"0', '"x0').replace("1", "-")] + src[i + 1:] for i in range(len(src))]
+    outcomes = {"ok": 0, "error": 0}
+    for k, lines in enumerate(variants):
+        p = tmp_path / f"v{k}.xml"
+        p.write_text("\n".join(lines))
+        try:
+            load(str(p))
+            outcomes["ok"] += 1
+        except SceneError as err:
+            assert err.file == str(p) and err.fix
+            outcomes["error"] += 1
+    assert outcomes["error"] > 20 and outcomes["ok"] > 20     # both paths were exercised
