@@ -1,0 +1,235 @@
+"""Cross-check gdlearn's path tracer against Mitsuba 3 on every shipped scene (issue 2).
+
+The Mitsuba references are cached in ``tests/references/`` (``scripts/make_references.py``: 32 x 32
+pixels, 8 independent seeds x 1024 spp, mean and per-pixel standard error). gdlearn renders the same
+scene file at the same resolution with 4 independent seeds; :func:`gdlearn.refs.compare.compare`
+then requires, for 4 x 4-pixel blocks and each channel,
+
+    |z| = |m_gdlearn - m_mitsuba| / sqrt(se_gdlearn^2 + se_mitsuba^2) < t.isf(alpha / (2 m), dof)
+
+(Welch's t with Welch-Satterthwaite degrees of freedom; Bonferroni over the m = 3 * 64 block tests
+plus the 3 channel means, family-wise false alarm alpha = 1e-3: about |z| < 4.6), and the image mean
+to agree within 3 % per channel. The tolerance is calibrated from the noise of both renderers, not
+picked: the tests below first prove the harness on Mitsuba alone (an independent Mitsuba render is
+accepted with mean z^2 ~ 1; a 5 % brighter light, a flipped image and missing indirect light are
+rejected), then compare gdlearn.
+
+Tests that render with Mitsuba skip when it is not installed (the ``[ref]`` extra); the gdlearn
+comparisons only need the cached references and run regardless.
+"""
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from gdlearn.refs import store
+from gdlearn.refs.compare import ImageStats, compare
+
+HAVE_MITSUBA = importlib.util.find_spec("mitsuba") is not None
+needs_mitsuba = pytest.mark.skipif(
+    not HAVE_MITSUBA, reason="Mitsuba 3 is not installed: pip install -e '.[ref]' "
+                             "(the README's test command installs it)")
+
+CASES = {c.name: c for c in store.reference_cases()}
+#: Family-wise false-alarm probability of one image comparison (Bonferroni inside compare()).
+ALPHA = 1e-3
+#: The image mean must agree to 3 % per channel: below the 5 % light change the harness must catch,
+#: and (asserted in the tests) at least 3 standard errors of the relative mean difference wide, so
+#: noise alone trips it with probability < 0.3 % (normal two-sided tail at 3 sigma). The image mean
+#: of these scenes is noisy (per-sample relative sd ~4 in the Cornell box, ~7 in the fog box: a few
+#: pixels straddle the light's edge), so a tighter fixed bound would need far more samples.
+REL_BOUND = 0.03
+#: gdlearn's side: K independent seeds; spp per seed from the reference's own noise (see _gd_spp).
+GD_SEEDS = (1, 2, 3, 4)
+#: Target relative standard error of gdlearn's image mean: with the reference's (<= 0.4 %) the
+#: combined error stays < 1 %, i.e. REL_BOUND is >= 3 standard errors wide.
+GD_REL_SE = 0.008
+#: Cases not compared with gdlearn, and why (evidence in the reason; the analytic tests cover them).
+KNOWN_REFERENCE_BIAS = {
+    "test-furnace-sphere": "Mitsuba 3.9 itself misses the analytic furnace value here: scalar_rgb gives "
+                           "2.018 +- 0.0004 (llvm_ad_rgb 2.002) for Le / (1 - rho) = 2 (max_depth 2: 1.5103 "
+                           "vs 1.5), a float32 bias far beyond the noise; gdlearn gives 2.0002, so the "
+                           "comparison would flag Mitsuba, not gdlearn. tests of the analytic furnace "
+                           "value cover this scene.",
+}
+#: Mitsuba stand-in for the harness tests (it plays gdlearn's part: same seed count, same spp rule);
+#: its seeds are independent of the references' (1000...).
+MI_SEEDS = GD_SEEDS
+
+
+def _check_rel_bound_has_power(a: ImageStats, b: ImageStats):
+    """The image-mean bound must be >= 3 standard errors of the relative mean difference."""
+    n = a.mean.shape[0] * a.mean.shape[1]
+    se = np.sqrt(a.var.sum((0, 1)) + b.var.sum((0, 1))) / n
+    rel_se = se / np.maximum(b.mean.mean((0, 1)), 1e-12)
+    assert np.all(3 * rel_se < REL_BOUND), f"image mean too noisy for the REL_BOUND: rel se {rel_se}"
+
+
+def _gd_spp(ref: ImageStats, settings: dict) -> int:
+    """Samples per pixel per seed so that gdlearn's image mean has relative standard error ~GD_REL_SE,
+    assuming gdlearn's per-sample noise equals Mitsuba's (measured from the reference itself). Kept
+    in [32, 2048] so that no case costs more than a few seconds of rendering."""
+    n = ref.mean.shape[0] * ref.mean.shape[1]
+    rel_se_ref = np.sqrt(ref.var.sum((0, 1))) / n / np.maximum(ref.mean.mean((0, 1)), 1e-12)
+    per_sample_sd = float(rel_se_ref.max()) * np.sqrt(n * len(settings["seeds"]) * settings["spp"])
+    spp_total = (per_sample_sd / GD_REL_SE) ** 2 / n
+    return int(np.clip(32 * np.ceil(spp_total / len(GD_SEEDS) / 32), 32, 2048))
+
+
+def _reference(name: str) -> ImageStats:
+    ref, _ = store.load_reference(CASES[name])
+    return ref
+
+
+def _perturb(s: ImageStats, kind: str) -> ImageStats:
+    if kind == "light+5%":      # light transport is linear in the emitted radiance (one light)
+        return ImageStats(s.mean * 1.05, s.var * 1.05 ** 2, s.dof)
+    if kind == "flip-vertical":
+        return ImageStats(s.mean[::-1], s.var[::-1], s.dof[::-1])
+    if kind == "flip-horizontal":
+        return ImageStats(s.mean[:, ::-1], s.var[:, ::-1], s.dof[:, ::-1])
+    raise ValueError(kind)
+
+
+# -- the references themselves ---------------------------------------------------------------------
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_reference_present_and_fresh(name):
+    """Every case has a reference made from the scene file as it is now (else: the fix to run)."""
+    ref, settings = store.load_reference(CASES[name])
+    assert ref.mean.shape == (store.RES, store.RES, 3)
+    assert np.isfinite(ref.mean).all() and np.isfinite(ref.var).all()
+    assert ref.mean.mean() > 0, f"{name}: the Mitsuba reference is black; is the scene lit?"
+
+
+# -- the harness, proven on Mitsuba alone ------------------------------------------------------------
+_mi_cache: dict = {}
+
+
+def _mitsuba_standin(name: str, variant: str = "scalar_rgb", **extra) -> ImageStats:
+    from gdlearn.refs.mitsuba import render_mitsuba
+
+    case = CASES[name]
+    key = (name, variant, tuple(sorted(extra.items())))
+    if key not in _mi_cache:
+        d = dict(case.mitsuba, res=store.RES, **extra)
+        spp = _gd_spp(*store.load_reference(case))
+        imgs = [render_mitsuba(store.ROOT / case.scene, spp, s, variant, 2, **d) for s in MI_SEEDS]
+        _mi_cache[key] = ImageStats.from_samples(imgs)
+    return _mi_cache[key]
+
+
+@needs_mitsuba
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("name", ["cornell-box", "cornell-box.direct", "fog-box.direct"])
+def test_harness_accepts_independent_mitsuba_render(name):
+    """Mitsuba at other seeds passes, and its z-scores are calibrated: mean z^2 ~ 1. With 64 blocks
+    whose R, G, B z are strongly correlated (~64 independent values), mean z^2 has sd ~ sqrt(2/64)
+    = 0.18; [0.4, 1.8] is > 3 sd either side (plus room for Student-t tails)."""
+    ref, test = _reference(name), _mitsuba_standin(name)
+    c = compare(test, ref, alpha=ALPHA, rel_bound=REL_BOUND)
+    assert c.ok, c.summary()
+    assert 0.4 < c.mean_z2 < 1.8, c.summary()
+    _check_rel_bound_has_power(test, ref)
+
+
+@needs_mitsuba
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("kind", ["light+5%", "flip-vertical", "flip-horizontal"])
+def test_harness_rejects_perturbed_image(kind):
+    """The same accepted Mitsuba render, perturbed, must be rejected: the comparison can fail."""
+    ref, test = _reference("cornell-box"), _mitsuba_standin("cornell-box")
+    c = compare(_perturb(test, kind), ref, alpha=ALPHA, rel_bound=REL_BOUND)
+    assert not c.ok, f"a {kind} image was accepted: {c.summary()}"
+
+
+@needs_mitsuba
+@pytest.mark.mitsuba
+def test_harness_rejects_brighter_light_in_scene():
+    """A 5 % brighter emitter set in Mitsuba's scene itself (not by scaling pixels) is rejected."""
+    import mitsuba as mi
+
+    from gdlearn.refs.mitsuba import set_threads
+
+    mi.set_variant("scalar_rgb")
+    set_threads(2)
+    scene = mi.load_file(str(store.ROOT / "scenes/cornell-box.xml"), res=str(store.RES))
+    params = mi.traverse(scene)
+    keys = [k for k in params.keys() if k.endswith("emitter.radiance.value")]
+    assert keys, "no area emitter radiance found in the Cornell box"
+    for k in keys:
+        params[k] = params[k] * 1.05
+    params.update()
+    spp = _gd_spp(*store.load_reference(CASES["cornell-box"]))
+    imgs = [np.array(mi.render(scene, seed=s, spp=spp), dtype=np.float64)[..., :3] for s in MI_SEEDS]
+    c = compare(ImageStats.from_samples(imgs), _reference("cornell-box"), alpha=ALPHA, rel_bound=REL_BOUND)
+    assert not c.ok, c.summary()
+
+
+@needs_mitsuba
+@pytest.mark.mitsuba
+def test_harness_rejects_missing_indirect_light():
+    """Direct light only (max_depth 2) against the full Cornell box: a transport bug is caught."""
+    c = compare(_mitsuba_standin("cornell-box.direct"), _reference("cornell-box"), alpha=ALPHA,
+                rel_bound=REL_BOUND)
+    assert not c.ok, c.summary()
+
+
+@needs_mitsuba
+@pytest.mark.mitsuba
+def test_llvm_variant_matches_scalar_reference():
+    """Mitsuba's two back-ends agree within the calibrated tolerance (skips without libLLVM >= 16)."""
+    from gdlearn.refs.mitsuba import variant_works
+
+    ok, why = variant_works("llvm_ad_rgb")
+    if not ok:
+        pytest.skip(why)
+    c = compare(_mitsuba_standin("cornell-box", "llvm_ad_rgb"), _reference("cornell-box"),
+                alpha=ALPHA, rel_bound=REL_BOUND)
+    assert c.ok, c.summary()
+
+
+# -- gdlearn's path tracer against the references ------------------------------------------------------
+_gd_cache: dict = {}
+
+
+def _gdlearn_render(name: str) -> ImageStats:
+    try:
+        from gdlearn.integrators import get, make, render
+        from gdlearn.scene.load import load
+        get("pt")
+    except (ImportError, AttributeError) as err:
+        pytest.skip(f"gdlearn's path tracer or scene loader is not importable yet: {err}")
+    case = CASES[name]
+    if name not in _gd_cache:
+        ref, settings = store.load_reference(case)
+        spp = _gd_spp(ref, settings)
+        scene = load(store.ROOT / case.scene, res=store.RES)
+        opts = dict(spp_per_pass=spp, threads=2)
+        if case.effects:
+            opts["effects"] = list(case.effects)
+        imgs = [render(make("pt", scene, seed=s, **opts), spp=spp).primal for s in GD_SEEDS]
+        _gd_cache[name] = ImageStats.from_samples(imgs)
+    return _gd_cache[name]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_gdlearn_pt_matches_mitsuba(name):
+    """gdlearn's PT converges to Mitsuba 3's image on every shipped scene (and the direct cases)."""
+    if name in KNOWN_REFERENCE_BIAS:
+        pytest.skip(KNOWN_REFERENCE_BIAS[name])
+    ref, test = _reference(name), _gdlearn_render(name)
+    c = compare(test, ref, alpha=ALPHA, rel_bound=REL_BOUND)
+    assert c.ok, f"{name}: {c.summary()}"
+    _check_rel_bound_has_power(test, ref)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["light+5%", "flip-vertical"])
+def test_gdlearn_comparison_can_fail(kind):
+    """The same comparison rejects gdlearn's Cornell box once perturbed."""
+    c = compare(_perturb(_gdlearn_render("cornell-box"), kind), _reference("cornell-box"),
+                alpha=ALPHA, rel_bound=REL_BOUND)
+    assert not c.ok, c.summary()
