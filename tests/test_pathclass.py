@@ -122,3 +122,24 @@ def test_counts_saturate_and_stay_classifiable():
     assert pc.pc_class(s) == NAMES.index("specular")           # all specular: no caustic
     assert pc.pc_class(pc.pc_push(s2, layout.V_SPECULAR)) == NAMES.index("caustics")
     assert s > 0 and s2 > 0
+
+
+def test_usable_inside_njit_with_int32_vertex_classes():
+    """The tracer calls these from numba with vertex classes read from int32 arrays."""
+    from numba import njit
+
+    @njit(cache=False)
+    def trace(vcs, mask):
+        s = pc.pc_init()
+        out = np.empty(len(vcs), dtype=np.int64)
+        for i in range(len(vcs)):
+            s = pc.pc_push(s, vcs[i])
+            out[i] = pc.pc_class(s) if pc.pc_reachable(s, mask) else -1
+        return out, pc.pc_max_interior(mask)
+
+    vcs = np.array([CODE[c] for c in "DSSM"], dtype=np.int32)
+    got, bound = trace(vcs, pc.ALL_MASK)
+    assert [int(g) for g in got] == [reference_class(p) for p in ("D", "DS", "DSS", "DSSM")]
+    assert bound == -1
+    got, bound = trace(vcs, 0b11)          # "direct": the prefix dies after its first vertex
+    assert int(got[0]) == 1 and int(got[1]) == -1 and bound == 1

@@ -257,9 +257,9 @@ def test_smooth_normals_point_outwards(tmp_path):
 def test_polygon_obj_and_ascii_ply(tmp_path):
     (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1 4/1\n")
     (tmp_path / "tri.ply").write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n"
-                                      "property float y\nproperty float z\nelement face 1\n"
+                                      "property float y\nproperty float z\nelement face 2\n"
                                       "property list uchar int vertex_indices\nend_header\n"
-                                      "0 0 0\n2 0 0\n2 2 0\n0 2 0\n4 0 1 2 3\n")
+                                      "0 0 0\n2 0 0\n2 2 0\n0 2 0\n3 0 1 2\n3 0 2 3\n")
     p = _write(tmp_path, '<shape type="obj" id="q"><string name="filename" value="quad.obj"/></shape>'
                '<shape type="ply" id="t"><string name="filename" value="tri.ply"/></shape>')
     q, t = load(p).shapes
@@ -281,3 +281,27 @@ def test_error_is_a_value_error_with_fields(tmp_path):
     with pytest.raises(SceneError) as e:
         load(p)
     assert e.value.file == p and e.value.line == 2 and "fix:" in str(e.value)
+
+
+def test_binary_ply_and_obj_negative_indices_refused(tmp_path):
+    import struct
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty double x\n"
+            "property double y\nproperty double z\nelement face 2\n"
+            "property list uchar uint vertex_indices\nend_header\n").encode()
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]], dtype="<f8").tobytes()
+    faces = struct.pack("<B3I", 3, 0, 1, 2) + struct.pack("<B3I", 3, 0, 4, 1)
+    (tmp_path / "mixed.ply").write_bytes(head + verts + faces)
+    p = _write(tmp_path, '<shape type="ply" id="a"><string name="filename" value="mixed.ply"/>'
+               '<boolean name="face_normals" value="true"/></shape>')
+    a, = load(p).shapes
+    assert a.faces.tolist() == [[0, 1, 2], [0, 4, 1]] and a.normals is None
+    ref = {s.id(): s for s in _mi_load(p).shapes()}
+    assert ref["a"].face_count() == 2 and abs(ref["a"].surface_area() - 1.0) < 1e-6
+    # Mitsuba refuses relative OBJ indices ("reference to invalid vertex"): so does gdlearn
+    (tmp_path / "neg.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n")
+    p = _write(tmp_path, '<shape type="obj" id="b"><string name="filename" value="neg.obj"/></shape>',
+               name="neg.xml")
+    with pytest.raises(SceneError, match="negative"):
+        load(p)
+    with pytest.raises(RuntimeError):
+        _mi_load(p)

@@ -4,12 +4,14 @@ What Mitsuba 3's ``obj`` and ``ply`` shapes read (src/shapes/obj.cpp, ply.cpp), 
 the renderer needs:
 
 * OBJ: ``v x y z``, ``vn``, ``vt`` and ``f`` records with ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``
-  corners (1-based, negative = relative to the end); polygons are fan-triangulated
+  corners (1-based; Mitsuba reads no negative, relative indices, so they are an error here);
+  polygons are fan-triangulated
   (``f a b c d`` -> ``a b c``, ``a c d``). Other records (``o``, ``g``, ``s``, ``usemtl``, ``mtllib``)
   are ignored.
 * PLY: ``format ascii 1.0`` or ``binary_little_endian 1.0``; element ``vertex`` with float/double
   ``x y z`` (and optional ``nx ny nz``); element ``face`` with ``list <uchar|int|...> <int|uint>
-  vertex_indices`` (or ``vertex_index``); polygons fan-triangulated.
+  vertex_indices`` (or ``vertex_index``) holding triangles only: Mitsuba's PLY loader refuses
+  other polygons ("is this a triangle mesh?"), so gdlearn does too, with a fix.
 
 Functions raise :class:`MeshError` (a plain message and fix); the loader turns it into a
 :class:`~gdlearn.scene.model.SceneError` at the line of the ``<shape>``.
@@ -83,8 +85,11 @@ def _obj_corner(text: str):
 
 
 def _resolve(i: int, n: int, filename: str, lineno: int, what: str) -> int:
-    j = i - 1 if i > 0 else n + i          # 1-based; negative counts back from the last one
-    if i == 0 or not 0 <= j < n:
+    if i < 0:
+        raise MeshError(f"{filename}:{lineno}: negative (relative) {what} index {i}: Mitsuba's OBJ "
+                        "loader does not support them", "write absolute 1-based indices")
+    j = i - 1
+    if not 0 <= j < n:
         raise MeshError(f"{filename}:{lineno}: {what} index {i} is out of range (1..{n})",
                         "fix the face record or the number of 'v'/'vn' records")
     return j
@@ -209,8 +214,12 @@ def _ply_mesh(data, filename):
     if isinstance(idx, np.ndarray) and idx.ndim == 2 and idx.shape[1] == 3:
         F = idx
     else:
-        tris = [(f[0], f[j], f[j + 1]) for f in idx for j in range(1, len(f) - 1)]
-        F = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+        sizes = {len(f) for f in idx}
+        if sizes - {3}:
+            raise MeshError(f"{filename}: PLY faces with {sorted(sizes - {3})} vertices; Mitsuba's PLY "
+                            "loader reads triangles only", "triangulate the mesh (or save it as OBJ, "
+                            "whose polygons are triangulated on load)")
+        F = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
     if F.size and (F.min() < 0 or F.max() >= len(V)):
         raise MeshError(f"{filename}: a face index is out of range (0..{len(V) - 1})",
                         "fix the face list or the vertex count")
