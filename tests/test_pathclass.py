@@ -77,7 +77,7 @@ def brute_reachable(prefix):
 
 @pytest.fixture(scope="module")
 def reach_table():
-    return {p: brute_reachable(p) for p in strings(5)}
+    return {p: brute_reachable(p) for p in strings(6)}
 
 
 def test_reachable_single_class_masks(reach_table):
