@@ -289,3 +289,19 @@ def test_stability_finite_and_bounded(kw):
         probes = np.vstack([probes, wo[:200]])
         f, p = _eval_pdf_many(row, wi, probes)
         assert np.all(np.isfinite(f)) and np.all(np.isfinite(p)) and np.all(f >= 0) and np.all(p >= 0)
+
+
+def test_sampled_lobe_class_of_roughplastic():
+    """The class follows the lobe the sampler picked: for u_lobe below the coating probability the
+    sample comes from the microfacet lobe (checked: wo is near the mirror direction for small alpha)."""
+    th = L.ROUGHNESS_THRESHOLD
+    wi = wi_at(0.5)
+    for alpha, spec_class in ((0.3, L.V_GLOSSY), (0.01, L.V_SPECULAR)):
+        row = row_of(type="roughplastic", alpha=alpha, reflectance=rgb(0.4), int_ior=1.5, ext_ior=1.0)
+        assert B.sampled_lobe_class(row, wi, 0.0, False, th) == spec_class
+        assert B.sampled_lobe_class(row, wi, 0.999, False, th) == L.V_DIFFUSE
+        if alpha == 0.01:
+            wo = B.bsdf_sample(row, wi, 0.0, 0.3, 0.6)[0]
+            assert np.dot(wo, [-wi[0], -wi[1], wi[2]]) > 0.99
+    assert B.sampled_lobe_class(row_of(type="plastic"), wi, 0.0, True, th) == L.V_SPECULAR
+    assert B.sampled_lobe_class(row_of(type="diffuse"), wi, 0.0, False, th) == L.V_DIFFUSE

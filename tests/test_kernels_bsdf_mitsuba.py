@@ -89,3 +89,40 @@ def test_eval_pdf_match_mitsuba(name):
         np.testing.assert_allclose(p_g, p_m, rtol=RTOL, atol=ATOL, err_msg=f"pdf {wi} {wo}")
         nonzero += p_m > 0
     assert nonzero >= 50         # the comparison exercised the lobes, not just zeros
+
+
+@pytest.mark.parametrize("name", sorted(CASES) + ["dielectric"])
+def test_sample_matches_mitsuba_for_the_same_random_numbers(name):
+    """Same (u_lobe, u1, u2) -> same direction, weight and pdf as Mitsuba's BSDF::sample (the warps
+    and lobe selection are Mitsuba's). Tolerances: directions 1e-4 absolute, weight / pdf 5e-4
+    relative -- float32 rounding (~1e-6) amplified where a sample sits near a lobe's steep flank, and
+    Mitsuba's 3 float32 Newton steps in Beckmann visible-normal sampling (we iterate to convergence);
+    measured worst cases are 1.4e-6 (direction) and 7e-5 (weight)."""
+    mi.set_variant("scalar_rgb")
+    if name == "dielectric":
+        md, model = ({"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0},
+                     BSDF(type="dielectric", int_ior=1.5, ext_ior=1.0))
+    else:
+        md, model = CASES[name]
+    b = mi.load_dict(md)
+    row = B.material_row(model, width=ROUGHPLASTIC_WIDTH)
+    rng = np.random.default_rng(zlib.crc32(name.encode()) + 1)
+    ctx = mi.BSDFContext()
+    valid = 0
+    for _ in range(200):
+        wi = rng.normal(size=3)
+        wi /= np.linalg.norm(wi)
+        u = rng.random(3)
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*wi)
+        bs, w_m = b.sample(ctx, si, float(u[0]), mi.Point2f(float(u[1]), float(u[2])))
+        w_m = np.array(w_m, dtype=np.float64)
+        wo, w_g, p_g, _ = B.bsdf_sample(row, tuple(wi), u[0], u[1], u[2])
+        if w_m.max() == 0.0:
+            assert max(w_g) == 0.0
+            continue
+        valid += 1
+        np.testing.assert_allclose(wo, np.array(bs.wo), atol=1e-4)
+        np.testing.assert_allclose(w_g, w_m, rtol=5e-4, atol=1e-6)
+        assert p_g == pytest.approx(float(bs.pdf), rel=5e-4)
+    assert valid >= 40

@@ -26,7 +26,7 @@ from gdlearn.kernels.bsdf_dielectric import (dielectric_sample, roughdielectric_
 from gdlearn.kernels.bsdf_diffuse import diffuse_eval, diffuse_pdf, diffuse_sample
 from gdlearn.kernels.bsdf_plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plastic_pdf, plastic_sample,
                                           prepare_plastic, roughplastic_eval, roughplastic_pdf,
-                                          roughplastic_sample)
+                                          roughplastic_sample, roughplastic_spec_prob)
 
 ZERO3 = (0.0, 0.0, 0.0)
 
@@ -171,6 +171,22 @@ def lobe_class(mat, is_delta, threshold):
     if is_delta:
         return L.V_SPECULAR
     return vertex_class(mat, threshold)
+
+
+@njit(cache=True)
+def sampled_lobe_class(mat, wi, u_lobe, is_delta, threshold):
+    """Like :func:`lobe_class` but also resolves a rough plastic, whose two lobes are both non-delta:
+    the lobe bsdf_sample picked for this (wi, u_lobe) -- the microfacet coating (V_GLOSSY, or
+    V_SPECULAR below the threshold) or the diffuse base (V_DIFFUSE). Matches the effects plan, which
+    lets a roughplastic produce both kinds of vertices."""
+    if int(mat[L.MAT_TYPE]) != L.ROUGHPLASTIC or is_delta:
+        return lobe_class(mat, is_delta, threshold)
+    cos_i = -wi[2] if _flips(mat, wi) else wi[2]
+    if cos_i <= 0.0:
+        return L.V_DIFFUSE
+    if u_lobe < roughplastic_spec_prob(mat, cos_i):
+        return L.V_GLOSSY if mat[L.MAT_ALPHA] >= threshold else L.V_SPECULAR
+    return L.V_DIFFUSE
 
 
 # --- building rows (Python, once per material) -----------------------------------------------------

@@ -114,6 +114,12 @@ def rough_transmittance(mat, cos_theta):
 
 
 @njit(cache=True)
+def roughplastic_spec_prob(mat, cos_i):
+    """Probability that roughplastic_sample picks the microfacet coating at incidence cos_i."""
+    return _spec_prob(1.0 - rough_transmittance(mat, cos_i), mat)
+
+
+@njit(cache=True)
 def roughplastic_eval(mat, wi, wo):
     cos_i, cos_o = wi[2], wo[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
@@ -141,7 +147,7 @@ def roughplastic_pdf(mat, wi, wo):
     if cos_i <= 0.0 or cos_o <= 0.0:
         return 0.0
     dist, alpha = int(mat[MAT_DIST]), mat[MAT_ALPHA]
-    p_spec = _spec_prob(1.0 - rough_transmittance(mat, cos_i), mat)
+    p_spec = roughplastic_spec_prob(mat, cos_i)
     hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
     n = math.sqrt(hx * hx + hy * hy + hz * hz)
     h = (hx / n, hy / n, hz / n)
@@ -155,7 +161,7 @@ def roughplastic_sample(mat, wi, u_lobe, u1, u2):
     cos_i = wi[2]
     if cos_i <= 0.0:
         return ZERO3, ZERO3, 0.0, False
-    p_spec = _spec_prob(1.0 - rough_transmittance(mat, cos_i), mat)
+    p_spec = roughplastic_spec_prob(mat, cos_i)
     if u_lobe < p_spec:
         m = mf_sample(int(mat[MAT_DIST]), mat[MAT_ALPHA], wi, u1, u2)[0]
         wo = reflect_m(wi, m)
