@@ -1,0 +1,104 @@
+"""The primal path tracer ("pt"): Mitsuba 3's ``path`` / ``volpath`` as a progressive estimator.
+
+One pass renders ``spp_per_pass`` samples in every pixel. Rows are distributed over the threads
+with ``prange`` (dynamic chunks, so the costlier rows of a scene do not idle a core); every row
+writes only its own pixels, and every random number is ``rand(seed, pixel key, sample index, dim)``
+-- so the image is the same for 1 and 2 threads and for any pass split.
+
+The per-path kernels live in :mod:`gdlearn.kernels.surface_path` (``path``: surfaces only) and
+:mod:`gdlearn.kernels.volume_path` (``volpath``: homogeneous media, null interfaces, camera medium).
+A scene whose effects plan needs no media never compiles or runs the volume kernel.
+"""
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from ..kernels.bvh import STACK_SIZE
+from ..kernels.camera import camera_ray
+from ..kernels.rng import rand
+from ..kernels.surface_path import radiance_path
+from ..scene.compile import compile_scene
+from .base import PassResult, ProgressiveIntegrator
+
+#: Mitsuba's max_depth = -1 (unbounded) as a loop bound; Russian roulette ends such paths.
+UNBOUNDED = 1 << 30
+
+
+@njit(cache=True, parallel=True)
+def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
+    """Mean radiance of samples sample0 .. sample0+spp-1 of every pixel into ``out`` (H x W x 3);
+    ``bad[y]`` counts the non-finite samples dropped in row y."""
+    h, w = out.shape[0], out.shape[1]
+    cam = sa.camera
+    inv = 1.0 / spp
+    for y in prange(h):
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        nbad = 0
+        for x in range(w):
+            key = y * w + x
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            for s in range(sample0, sample0 + spp):
+                o, d, tmax = camera_ray(cam, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                c = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, stack)
+                if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
+                    a0 += c[0]
+                    a1 += c[1]
+                    a2 += c[2]
+                else:
+                    nbad += 1
+            out[y, x, 0] = a0 * inv
+            out[y, x, 1] = a1 * inv
+            out[y, x, 2] = a2 * inv
+        bad[y] = nbad
+
+
+class PathTracer(ProgressiveIntegrator):
+    """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None)``.
+
+    ``max_depth`` overrides the scene integrator's (Mitsuba's meaning); ``threads`` sets numba's
+    thread count for this integrator's passes; ``effects`` (a list of effect names, or a comma
+    separated string) restricts the image to those light paths (see :mod:`gdlearn.scene.effects`).
+    """
+
+    name = "pt"
+
+    def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None,
+                 max_depth=None, sa=None):
+        super().__init__(scene, seed=seed, spp_per_pass=spp_per_pass)
+        self.sa = sa if sa is not None else compile_scene(scene)
+        md = scene.integrator.max_depth if max_depth is None else int(max_depth)
+        self.max_depth = UNBOUNDED if md < 0 else md
+        self.rr_depth = int(scene.integrator.rr_depth)
+        self.threads = threads
+        self.width, self.height = scene.sensor.film.width, scene.sensor.film.height
+
+    def _run(self, sa, sample0, spp, out):
+        bad = np.zeros(out.shape[0], dtype=np.int64)
+        old = numba.get_num_threads()
+        if self.threads is not None:
+            numba.set_num_threads(int(self.threads))
+        try:
+            render_rows_path(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, out, bad)
+        finally:
+            numba.set_num_threads(old)
+        return int(bad.sum())
+
+    def compile(self) -> float:
+        t0 = time.perf_counter()
+        self._run(self.sa, 0, 1, np.zeros((2, 2, 3)))
+        return time.perf_counter() - t0
+
+    def render_pass(self, pass_index: int) -> PassResult:
+        out = np.zeros((self.height, self.width, 3))
+        t0 = time.perf_counter()
+        nbad = self._run(self.sa, pass_index * self.spp_per_pass, self.spp_per_pass, out)
+        dt = time.perf_counter() - t0
+        n = self.width * self.height * self.spp_per_pass
+        return PassResult(images={"primal": out}, spp=self.spp_per_pass, timings={"trace": dt},
+                          stats={"paths": n, "nonfinite_samples": nbad})

@@ -1,0 +1,190 @@
+"""Ray-primitive intersection and surface interactions: triangles, spheres, disks.
+
+Every shape of a scene is flattened (by :mod:`gdlearn.scene.compile`) into *primitives*, one row of
+``PRIM_WIDTH`` float64 per primitive in ``sa.prims`` and one row of ``INFO_WIDTH`` int32 in
+``sa.prim_info`` (type, material, emitter, interior and exterior medium). Rectangles, cubes and
+meshes become triangles (Mitsuba 3's ``rectangle`` is a planar quad: two triangles are the same
+surface); spheres and disks stay analytic, so their areas -- and hence emitted power -- are exact.
+
+Intersection is split as in Mitsuba 3 (``PreliminaryIntersection`` -> ``SurfaceInteraction``):
+the hot traversal only returns ``(t, prim, u, v)``; :func:`surface` then computes the position,
+the geometric normal, the shading normal and the side, for the one hit that matters.
+
+Normals follow Mitsuba 3: a triangle's geometric normal is ``normalize(cross(p1 - p0, p2 - p0))``
+(``src/render/mesh.cpp``), a rectangle's is ``to_world`` applied to +z as a normal
+(``src/shapes/rectangle.cpp``), a sphere's points outwards, a disk's is +z; ``flip_normals`` negates
+them. The compile step stores the final geometric normal, so kernels never re-derive it.
+"""
+import math
+
+from numba import njit
+
+from .vec import cross, dot, normalize, sub
+
+# --- primitive types (column INFO_TYPE) ----------------------------------------------------------
+P_TRIANGLE = 0
+P_SPHERE = 1
+P_DISK = 2
+
+# --- int32 row of sa.prim_info ---------------------------------------------------------------------
+INFO_TYPE = 0
+INFO_MAT = 1        # row of sa.materials
+INFO_EMITTER = 2    # row of sa.emitters, -1 if the primitive does not emit
+INFO_MED_INT = 3    # interior medium row, -1 = vacuum
+INFO_MED_EXT = 4    # exterior medium row, -1 = vacuum
+INFO_MED_TRANS = 5  # 1 if the shape declares any medium (Mitsuba's is_medium_transition())
+INFO_SHAPE = 6      # index of the scene shape the primitive came from
+INFO_WIDTH = 7
+
+# --- float64 row of sa.prims -----------------------------------------------------------------------
+# triangle: p0, e1 = p1 - p0, e2 = p2 - p0, geometric normal, vertex normals n0 n1 n2, has-normals flag
+# sphere:   centre, radius, normal sign (+1 outwards, -1 flipped)
+# disk:     centre, axis a, axis b (world images of local x, y), normal, dual axes da, db
+G_P0, G_E1, G_E2, G_NG = 0, 3, 6, 9
+G_N0, G_N1, G_N2, G_HASN = 12, 15, 18, 21
+G_C, G_R, G_SIGN = 0, 3, 4
+G_A, G_B, G_DA, G_DB = 3, 6, 12, 15
+PRIM_WIDTH = 22
+
+
+@njit(cache=True, inline="always")
+def _v(row, k):
+    return (row[k], row[k + 1], row[k + 2])
+
+
+@njit(cache=True)
+def intersect_triangle(row, o, d, tmax):
+    """Moeller-Trumbore: (t, u, v) with t = inf on a miss. u, v are barycentrics of p1 and p2."""
+    e1 = _v(row, G_E1)
+    e2 = _v(row, G_E2)
+    pv = cross(d, e2)
+    det = dot(e1, pv)
+    if det == 0.0:
+        return math.inf, 0.0, 0.0
+    inv = 1.0 / det
+    tv = (o[0] - row[0], o[1] - row[1], o[2] - row[2])
+    u = dot(tv, pv) * inv
+    if u < 0.0 or u > 1.0:
+        return math.inf, 0.0, 0.0
+    qv = cross(tv, e1)
+    v = dot(d, qv) * inv
+    if v < 0.0 or u + v > 1.0:
+        return math.inf, 0.0, 0.0
+    t = dot(e2, qv) * inv
+    if t <= 0.0 or t >= tmax:
+        return math.inf, 0.0, 0.0
+    return t, u, v
+
+
+@njit(cache=True)
+def intersect_sphere(row, o, d, tmin, tmax):
+    """Nearest root in (tmin, tmax) of |o + t d - c| = r, for a unit d.
+
+    Uses the cancellation-free discriminant r^2 - |f - (f.d) d|^2 (Haines et al., Ray Tracing Gems
+    ch. 7) so grazing rays and far-away spheres keep their precision.
+    """
+    f = (o[0] - row[0], o[1] - row[1], o[2] - row[2])
+    r = row[G_R]
+    b = -dot(f, d)
+    l = (f[0] + b * d[0], f[1] + b * d[1], f[2] + b * d[2])
+    disc = r * r - dot(l, l)
+    if disc < 0.0:
+        return math.inf
+    c = dot(f, f) - r * r
+    q = b + math.copysign(math.sqrt(disc), b)
+    if q == 0.0:
+        return math.inf
+    t0 = c / q
+    t1 = q
+    if t0 > t1:
+        t0, t1 = t1, t0
+    if t0 > tmin and t0 < tmax:
+        return t0
+    if t1 > tmin and t1 < tmax:
+        return t1
+    return math.inf
+
+
+@njit(cache=True)
+def intersect_disk(row, o, d, tmax):
+    """Plane of the disk, then local coordinates through the dual axes: inside if u^2 + v^2 <= 1."""
+    n = _v(row, G_NG)
+    dn = dot(d, n)
+    if dn == 0.0:
+        return math.inf, 0.0, 0.0
+    t = dot(sub(_v(row, G_C), o), n) / dn
+    if t <= 0.0 or t >= tmax:
+        return math.inf, 0.0, 0.0
+    rel = (o[0] + t * d[0] - row[0], o[1] + t * d[1] - row[1], o[2] + t * d[2] - row[2])
+    u = dot(rel, _v(row, G_DA))
+    v = dot(rel, _v(row, G_DB))
+    if u * u + v * v > 1.0:
+        return math.inf, 0.0, 0.0
+    return t, u, v
+
+
+@njit(cache=True)
+def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
+    """(t, u, v) of primitive ``i`` (t = inf: miss, or outside (tmin, tmax))."""
+    row = prims[i]
+    if ptype == P_TRIANGLE:
+        t, u, v = intersect_triangle(row, o, d, tmax)
+    elif ptype == P_SPHERE:
+        t = intersect_sphere(row, o, d, tmin, tmax)
+        u = 0.0
+        v = 0.0
+    else:
+        t, u, v = intersect_disk(row, o, d, tmax)
+    if t <= tmin:
+        return math.inf, 0.0, 0.0
+    return t, u, v
+
+
+@njit(cache=True)
+def surface(prims, prim_info, prim, o, d, t, u, v):
+    """The surface interaction of a hit: (p, ng, ns).
+
+    ``ng`` is the geometric normal (Mitsuba's ``si.n``), ``ns`` the shading normal (``si.sh_frame.n``;
+    interpolated vertex normals on smooth meshes, else ng). The hit point is recomputed on the
+    primitive (not o + t d) for triangles and disks, which keeps it on the surface to rounding.
+    """
+    row = prims[prim]
+    ptype = prim_info[prim, INFO_TYPE]
+    if ptype == P_TRIANGLE:
+        w = 1.0 - u - v
+        p = (row[0] + u * row[3] + v * row[6], row[1] + u * row[4] + v * row[7],
+             row[2] + u * row[5] + v * row[8])
+        ng = _v(row, G_NG)
+        if row[G_HASN] != 0.0:
+            ns = normalize((w * row[12] + u * row[15] + v * row[18], w * row[13] + u * row[16] + v * row[19],
+                            w * row[14] + u * row[17] + v * row[20]))
+        else:
+            ns = ng
+    elif ptype == P_SPHERE:
+        p0 = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        ng = normalize(sub(p0, _v(row, G_C)))
+        r = row[G_R]
+        # project back onto the sphere: o + t d drifts by ~t * eps
+        p = (row[0] + r * ng[0], row[1] + r * ng[1], row[2] + r * ng[2])
+        s = row[G_SIGN]
+        ng = (s * ng[0], s * ng[1], s * ng[2])
+        ns = ng
+    else:
+        p = (row[0] + u * row[3] + v * row[6], row[1] + u * row[4] + v * row[7],
+             row[2] + u * row[5] + v * row[8])
+        ng = _v(row, G_NG)
+        ns = ng
+    return p, ng, ns
+
+
+@njit(cache=True, inline="always")
+def offset_origin(p, ng, d):
+    """Spawn point for a ray leaving ``p`` along ``d``: pushed off the surface to d's side of ng.
+
+    The push scales with the coordinates' magnitude (float64 rounding is relative), like pbrt's
+    error-bound offset but with a fixed conservative bound (1e-9 relative, >= 1e-7 absolute).
+    """
+    eps = 1e-9 * max(abs(p[0]), max(abs(p[1]), abs(p[2]))) + 1e-7
+    if dot(d, ng) < 0.0:
+        eps = -eps
+    return (p[0] + eps * ng[0], p[1] + eps * ng[1], p[2] + eps * ng[2])

@@ -1,0 +1,222 @@
+"""Emitters: sampling a point/direction for next-event estimation, the matching pdf, and emission.
+
+Follows Mitsuba 3 (``src/render/scene.cpp`` and ``src/emitters/*.cpp``):
+
+* the scene picks one emitter *uniformly* (``Scene::sample_emitter``: probability 1/N, weight N);
+  every area-emitting shape is one emitter;
+* ``area``: a point uniform in area on the shape (pdf 1/A), converted to solid angle
+  ``dist^2 / |cos theta_q|``; it emits ``radiance`` only on the side its normal faces
+  (``src/emitters/area.cpp``: zero when ``cos_theta(si.wi) <= 0``);
+* ``point``: ``intensity / dist^2`` (delta position);
+* ``spot``: ``intensity * falloff / dist^2``, falloff 1 inside ``beam_width``, linear in angle down
+  to 0 at ``cutoff_angle`` (``src/emitters/spot.cpp::falloff_curve``); the spot shines along local +z;
+* ``directional``: ``irradiance`` from direction ``-direction`` (delta direction), shadow ray of
+  length 2 r of the scene's bounding sphere;
+* ``constant``: ``radiance`` from every direction, sampled uniformly on the sphere (pdf 1 / 4 pi).
+
+Emitter rows (``sa.emitters``, float64, ``EM_WIDTH``) hold the parameters; area emitters own the
+primitive range ``sa.em_prims[first : first + count]`` with the normalised cumulative areas in
+``sa.em_cdf`` (a primitive is chosen with probability area_i / A, then a uniform point on it).
+"""
+import math
+
+from numba import njit
+
+from .geometry import (G_A, G_B, G_C, G_E1, G_E2, G_HASN, G_NG, G_R, G_SIGN, INFO_TYPE, P_SPHERE,
+                       P_TRIANGLE)
+from .vec import dot, normalize
+
+E_AREA, E_POINT, E_SPOT, E_DIRECTIONAL, E_CONSTANT = 0, 1, 2, 3, 4
+
+EM_TYPE = 0
+EM_RGB = 1          # 3: radiance (area, constant) / intensity (point, spot) / irradiance (directional)
+EM_FIRST = 4        # area: first index into em_prims / em_cdf
+EM_COUNT = 5        # area: number of primitives
+EM_AREA = 6         # area: total surface area A
+EM_P = 7            # 3: point/spot position
+EM_D = 10           # 3: directional: the direction light travels (unit)
+EM_COS_CUTOFF = 13  # spot
+EM_COS_BEAM = 14
+EM_CUTOFF = 15      # radians
+EM_INV_TRANS = 16   # 1 / (cutoff - beam_width)
+EM_INV = 17         # 9: spot's inverse to_world 3x3, row-major (world -> local direction)
+EM_BS_R = 26        # scene bounding-sphere radius (directional, constant)
+EM_WIDTH = 28
+
+INV_FOUR_PI = 0.25 / math.pi
+
+
+@njit(cache=True)
+def prim_point(prims, prim_info, prim, u1, u2):
+    """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
+    ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
+    row = prims[prim]
+    pt = prim_info[prim, INFO_TYPE]
+    if pt == P_TRIANGLE:
+        su = math.sqrt(1.0 - u1)
+        b1 = 1.0 - su
+        b2 = u2 * su
+        q = (row[0] + b1 * row[G_E1] + b2 * row[G_E2], row[1] + b1 * row[G_E1 + 1] + b2 * row[G_E2 + 1],
+             row[2] + b1 * row[G_E1 + 2] + b2 * row[G_E2 + 2])
+        if row[G_HASN] != 0.0:
+            b0 = 1.0 - b1 - b2
+            n = normalize((b0 * row[12] + b1 * row[15] + b2 * row[18], b0 * row[13] + b1 * row[16] + b2 * row[19],
+                           b0 * row[14] + b1 * row[17] + b2 * row[20]))
+        else:
+            n = (row[G_NG], row[G_NG + 1], row[G_NG + 2])
+        return q, n
+    if pt == P_SPHERE:
+        z = 1.0 - 2.0 * u1
+        r = math.sqrt(max(0.0, 1.0 - z * z))
+        phi = 2.0 * math.pi * u2
+        w = (r * math.cos(phi), r * math.sin(phi), z)
+        rad = row[G_R]
+        s = row[G_SIGN]
+        return (row[0] + rad * w[0], row[1] + rad * w[1], row[2] + rad * w[2]), (s * w[0], s * w[1], s * w[2])
+    # disk: Shirley-Chiu concentric map of [0,1)^2 onto the unit disk, then the disk's affine axes
+    a = 2.0 * u1 - 1.0
+    b = 2.0 * u2 - 1.0
+    if a == 0.0 and b == 0.0:
+        x = 0.0
+        y = 0.0
+    elif abs(a) > abs(b):
+        x = a * math.cos(0.25 * math.pi * b / a)
+        y = a * math.sin(0.25 * math.pi * b / a)
+    else:
+        x = b * math.sin(0.25 * math.pi * a / b)
+        y = b * math.cos(0.25 * math.pi * a / b)
+    q = (row[G_C] + x * row[G_A] + y * row[G_B], row[G_C + 1] + x * row[G_A + 1] + y * row[G_B + 1],
+         row[G_C + 2] + x * row[G_A + 2] + y * row[G_B + 2])
+    return q, (row[G_NG], row[G_NG + 1], row[G_NG + 2])
+
+
+@njit(cache=True, inline="always")
+def _pick_prim(em_cdf, first, count, u):
+    """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
+    lo = first
+    hi = first + count - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if em_cdf[mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@njit(cache=True)
+def spot_falloff(row, d_world):
+    """Mitsuba's ``falloff_curve`` for the world direction ``d_world`` leaving the spot."""
+    lx = row[EM_INV] * d_world[0] + row[EM_INV + 1] * d_world[1] + row[EM_INV + 2] * d_world[2]
+    ly = row[EM_INV + 3] * d_world[0] + row[EM_INV + 4] * d_world[1] + row[EM_INV + 5] * d_world[2]
+    lz = row[EM_INV + 6] * d_world[0] + row[EM_INV + 7] * d_world[1] + row[EM_INV + 8] * d_world[2]
+    ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+    if ln == 0.0:
+        return 0.0
+    c = lz / ln
+    if c <= row[EM_COS_CUTOFF]:
+        return 0.0
+    if c >= row[EM_COS_BEAM]:
+        return 1.0
+    return (row[EM_CUTOFF] - math.acos(min(1.0, c))) * row[EM_INV_TRANS]
+
+
+@njit(cache=True)
+def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
+    """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
+
+    Returns (em, q, nq, d, dist, weight, pdf, pdf_area, is_delta):
+    ``q`` the emitter point (for directional/constant a point 2 r away along d), ``nq`` its normal
+    (zeros for point/spot/directional/constant), ``d`` the unit direction p -> q, ``dist`` |q - p|,
+    ``weight`` = Le(q -> p) / pdf (rgb, selection included; Mitsuba's ``em_weight``), ``pdf`` the
+    solid-angle pdf at p (selection included; for delta emitters the selection probability),
+    ``pdf_area`` the area pdf at q (selection included; 0 for delta and constant), ``is_delta``.
+    ``em = -1`` (and zero weight) when the sample carries no light (back side, outside the spot).
+    """
+    n_em = emitters.shape[0]
+    zero = (0.0, 0.0, 0.0)
+    if n_em == 0:
+        return -1, p, zero, zero, 0.0, zero, 0.0, 0.0, False
+    x = u_sel * n_em
+    em = min(int(x), n_em - 1)
+    u_rest = min(x - em, 0.9999999999999999)   # the leftover of u_sel picks the primitive
+    row = emitters[em]
+    et = int(row[EM_TYPE])
+    sel = 1.0 / n_em
+    rgb = (row[EM_RGB], row[EM_RGB + 1], row[EM_RGB + 2])
+    if et == E_AREA:
+        prim = _pick_prim(em_cdf, int(row[EM_FIRST]), int(row[EM_COUNT]), u_rest)
+        q, nq = prim_point(prims, prim_info, em_prims[prim], u1, u2)
+        dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+        dist2 = dot(dv, dv)
+        if dist2 == 0.0:
+            return -1, q, nq, zero, 0.0, zero, 0.0, 0.0, False
+        dist = math.sqrt(dist2)
+        d = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
+        cos_q = -dot(d, nq)
+        if cos_q <= 0.0:        # one-sided: the back of an area emitter is black
+            return -1, q, nq, d, dist, zero, 0.0, 0.0, False
+        pdf_area = sel / row[EM_AREA]
+        pdf = pdf_area * dist2 / cos_q
+        return em, q, nq, d, dist, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, pdf_area, False
+    if et == E_POINT or et == E_SPOT:
+        q = (row[EM_P], row[EM_P + 1], row[EM_P + 2])
+        dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+        dist2 = dot(dv, dv)
+        if dist2 == 0.0:
+            return -1, q, zero, zero, 0.0, zero, 0.0, 0.0, True
+        dist = math.sqrt(dist2)
+        d = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
+        f = 1.0 / (dist2 * sel)
+        if et == E_SPOT:
+            f *= spot_falloff(row, (-d[0], -d[1], -d[2]))
+            if f <= 0.0:
+                return -1, q, zero, d, dist, zero, 0.0, 0.0, True
+        return em, q, zero, d, dist, (rgb[0] * f, rgb[1] * f, rgb[2] * f), sel, 0.0, True
+    r2 = 2.0 * row[EM_BS_R]
+    if et == E_DIRECTIONAL:
+        d = (-row[EM_D], -row[EM_D + 1], -row[EM_D + 2])
+        q = (p[0] + r2 * d[0], p[1] + r2 * d[1], p[2] + r2 * d[2])
+        return em, q, zero, d, r2, (rgb[0] / sel, rgb[1] / sel, rgb[2] / sel), sel, 0.0, True
+    # constant: uniform direction on the sphere
+    z = 1.0 - 2.0 * u1
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * math.pi * u2
+    d = (r * math.cos(phi), r * math.sin(phi), z)
+    q = (p[0] + r2 * d[0], p[1] + r2 * d[1], p[2] + r2 * d[2])
+    pdf = sel * INV_FOUR_PI
+    return em, q, zero, d, r2, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, 0.0, False
+
+
+@njit(cache=True)
+def emitter_pdf(emitters, em, p, q, nq):
+    """Solid-angle pdf at ``p`` with which :func:`sample_emitter` would produce the emitter point
+    ``q`` (normal ``nq``) of emitter ``em`` (area or constant; delta emitters: 0). For constant
+    emitters q may be any point along the direction."""
+    n_em = emitters.shape[0]
+    et = int(emitters[em, EM_TYPE])
+    if et == E_CONSTANT:
+        return INV_FOUR_PI / n_em
+    if et != E_AREA:
+        return 0.0
+    dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+    dist2 = dot(dv, dv)
+    if dist2 == 0.0:
+        return 0.0
+    cos_q = abs(dot(dv, nq)) / math.sqrt(dist2)
+    if cos_q == 0.0:
+        return 0.0
+    return dist2 / (cos_q * emitters[em, EM_AREA] * n_em)
+
+
+@njit(cache=True)
+def eval_emitter(emitters, em, nq, d):
+    """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
+    shading normal ``nq`` (zero from behind); constant emitters ignore nq."""
+    row = emitters[em]
+    et = int(row[EM_TYPE])
+    if et == E_AREA and dot(d, nq) >= 0.0:
+        return (0.0, 0.0, 0.0)
+    if et != E_AREA and et != E_CONSTANT:
+        return (0.0, 0.0, 0.0)
+    return (row[EM_RGB], row[EM_RGB + 1], row[EM_RGB + 2])

@@ -1,0 +1,129 @@
+"""The primal path tracer for surfaces: Mitsuba 3's ``path`` integrator, one path per call.
+
+Unidirectional path tracing with next-event estimation and BSDF sampling combined by multiple
+importance sampling (Veach 1997, Sec. 9.2, power heuristic; Mitsuba 3 ``src/integrators/path.cpp``),
+Russian roulette from ``rr_depth`` on with Mitsuba's survival probability
+``q = min(max(throughput) * eta^2, 0.95)``. ``max_depth`` counts path segments as Mitsuba does:
+1 = emitters seen directly, 2 = direct lighting, -1 = unbounded. Media are ignored (``path``
+ignores them too); :mod:`gdlearn.kernels.volume_path` is the ``volpath`` counterpart.
+
+Random numbers (the layout random-sequence replay depends on, book chapter "replay"):
+``rand(seed, key, sample, dim)`` with the pixel's key and
+
+* dims 0, 1: the film position inside the pixel (drawn by the caller),
+* bounce b uses dims ``2 + b * DIMS_PER_BOUNCE + k`` with k =
+  0 emitter choice, 1-2 emitter point, 3 BSDF lobe, 4-5 BSDF direction, 6 Russian roulette,
+  7 medium distance, 8 medium channel (volpath), 9 spare.
+
+The radiance function receives the key *separately* from the film position, so an offset path can
+replay the base path's numbers at a neighbouring pixel.
+"""
+import math
+
+from numba import njit
+
+from .bsdf import bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample
+from .bvh import closest_hit
+from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
+from .lights import emitter_pdf, eval_emitter, sample_emitter
+from .rng import rand
+from .sampling import power_heuristic
+from .scene_query import occluded
+from .vec import coordinate_system, max3, to_local, to_world
+
+DIMS_PER_BOUNCE = 10
+D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_CH = range(9)
+
+
+
+@njit(cache=True, inline="always")
+def dim(bounce, k):
+    """The RNG dimension of quantity k at bounce b (see the module docstring)."""
+    return 2 + bounce * DIMS_PER_BOUNCE + k
+
+
+@njit(cache=True)
+def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
+    """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput)."""
+    s, t, n = ns_frame
+    em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
+        sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
+        rand(seed, key, sample, dim(bounce, D_EM_SEL)), rand(seed, key, sample, dim(bounce, D_EM_U1)),
+        rand(seed, key, sample, dim(bounce, D_EM_U2)))
+    if em < 0:
+        return (0.0, 0.0, 0.0)
+    wo = to_local(dl, s, t, n)
+    f = bsdf_eval(mat, wi, wo)
+    if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+        return (0.0, 0.0, 0.0)
+    if occluded(sa, p, ng, q, stack):
+        return (0.0, 0.0, 0.0)
+    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+    return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
+
+
+@njit(cache=True)
+def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, stack):
+    """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb."""
+    L0 = 0.0
+    L1 = 0.0
+    L2 = 0.0
+    beta = (1.0, 1.0, 1.0)
+    eta = 1.0
+    prev_p = o
+    prev_pdf = 1.0
+    prev_delta = True
+    depth = 0
+    tmin = 0.0
+    while True:
+        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, tmin, tmax, stack)
+        tmax = math.inf
+        if prim < 0:
+            if sa.env >= 0:        # escaped: the constant emitter
+                le = eval_emitter(sa.emitters, sa.env, d, d)
+                w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, sa.env, prev_p, d, d))
+                L0 += beta[0] * le[0] * w
+                L1 += beta[1] * le[1] * w
+                L2 += beta[2] * le[2] * w
+            break
+        p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
+        em = sa.prim_info[prim, INFO_EMITTER]
+        if em >= 0:                # emission seen by this segment, MIS against NEE of the previous vertex
+            le = eval_emitter(sa.emitters, em, ns, d)
+            if le[0] + le[1] + le[2] > 0.0:
+                w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, em, prev_p, p, ns))
+                L0 += beta[0] * le[0] * w
+                L1 += beta[1] * le[1] * w
+                L2 += beta[2] * le[2] * w
+        if max_depth >= 0 and depth + 1 >= max_depth:
+            break
+        mat = sa.materials[sa.prim_info[prim, INFO_MAT]]
+        s, tt = coordinate_system(ns)
+        wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
+        if not bsdf_is_delta_only(mat):
+            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack)
+            L0 += beta[0] * c[0]
+            L1 += beta[1] * c[1]
+            L2 += beta[2] * c[2]
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, rand(seed, key, sample, dim(depth, D_LOBE)),
+                                               rand(seed, key, sample, dim(depth, D_BSDF_U1)),
+                                               rand(seed, key, sample, dim(depth, D_BSDF_U2)))
+        if not pdf > 0.0:
+            break
+        beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
+        eta *= bsdf_eta(mat, wi, wo)
+        d = to_world(wo, s, tt, ns)
+        o = offset_origin(p, ng, d)
+        prev_p = p
+        prev_pdf = pdf
+        prev_delta = is_delta
+        depth += 1
+        bmax = max3(beta)
+        if depth >= rr_depth:
+            q = min(bmax * eta * eta, 0.95)
+            if rand(seed, key, sample, dim(depth - 1, D_RR)) >= q:
+                break
+            beta = (beta[0] / q, beta[1] / q, beta[2] / q)
+        if not bmax > 0.0:
+            break
+    return (L0, L1, L2)
