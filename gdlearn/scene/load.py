@@ -85,8 +85,11 @@ class _Loader:
                                  "the top level (see scenes/README.md)")
         if not seen_sensor:
             scene.sensor.fov, scene.sensor.fov_axis = plugins.DEFAULT_FOV, "diagonal"
-            self.warnings.append(f"{self.path}: no <sensor>: Mitsuba's default perspective camera at the "
-                                 "origin looking along +z")
+            self.warnings.append(f"{self.path}: no <sensor>: Mitsuba's scene would have no camera; gdlearn "
+                                 "uses a default perspective camera at the origin looking along +z")
+        if not seen_integrator:
+            self.warnings.append(f"{self.path}: no <integrator>: gdlearn uses path with max_depth -1 "
+                                 "(give one so that Mitsuba renders the same)")
         if "effects" in params:
             scene.effects = [e.strip() for e in params["effects"].split(",") if e.strip()]
         if not scene.shapes and not scene.emitters:
