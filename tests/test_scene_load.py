@@ -80,12 +80,38 @@ def test_shipped_scene_matches_mitsuba(path):
         np.testing.assert_allclose(lo, np.array(bb.min), atol=tol, err_msg=s.id)
         np.testing.assert_allclose(hi, np.array(bb.max), atol=tol, err_msg=s.id)
         assert (s.emitter is not None) == mshapes[s.id].is_emitter()
+    # media: the camera's and every shape's interior, as Mitsuba traverses them
+    _same_medium(ours.sensor.medium, ref.sensors()[0].get_medium())
+    for s in ours.shapes:
+        _same_medium(s.interior, mshapes[s.id].interior_medium())
+        _same_medium(s.exterior, mshapes[s.id].exterior_medium())
+    # point and spot lights: placement and angles
+    lights = [e for e in ref.emitters() if str(e).startswith(("SpotLight", "PointLight"))]
+    assert len(lights) == len([e for e in ours.emitters if e.type in ("spot", "point")])
+    for e, m in zip([e for e in ours.emitters if e.type in ("spot", "point")], lights):
+        mp = mi.traverse(m)
+        if "position" in mp:
+            np.testing.assert_allclose(e.position, np.array(mp["position"]).ravel(), atol=TOL)
+        else:
+            np.testing.assert_allclose(e.to_world, np.array(mp["to_world"].matrix), atol=TOL)
+        if e.type == "spot":
+            assert f"cutoff_angle = {e.cutoff_angle:g}" in str(m) and f"beam_width = {e.beam_width:g}" in str(m)
     # integrator
     integ = str(ref.integrator())
     assert integ.startswith("VolumetricSimplePathIntegrator" if ours.integrator.type == "volpath"
                             else "PathIntegrator")
     depth = ours.integrator.max_depth
     assert f"max_depth = {depth if depth >= 0 else 2**32 - 1}" in integ   # Mitsuba prints -1 as uint32
+
+
+def _same_medium(ours, theirs):
+    assert (ours is None) == (theirs is None)
+    if ours is None:
+        return
+    p = mi.traverse(theirs)
+    assert np.allclose(ours.sigma_t, p["scale"] * p["sigma_t.value.value"], rtol=1e-6)
+    assert np.allclose(ours.albedo, p["albedo.value.value"], rtol=1e-6)
+    assert abs(ours.g - (p["phase_function.g"] if "phase_function.g" in p else 0.0)) < 1e-6
 
 
 def _x_fov(sensor):
