@@ -331,3 +331,21 @@ def test_binary_ply_and_obj_negative_indices_refused(tmp_path):
         load(p)
     with pytest.raises(RuntimeError):
         _mi_load(p)
+
+
+def test_directional_constant_and_twosided(tmp_path):
+    p = _write(tmp_path, """<emitter type="directional"><vector name="direction" x="1" y="-1" z="0.5"/>
+        <rgb name="irradiance" value="2, 3, 4"/></emitter>
+        <emitter type="constant"><rgb name="radiance" value="0.25"/></emitter>
+        <shape type="rectangle" id="r"><bsdf type="twosided"><bsdf type="plastic">
+        <rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/></bsdf></bsdf></shape>""")
+    sc, ref = load(p), _mi_load(p)
+    d, c = sc.emitters
+    mdir = [e for e in ref.emitters() if str(e).startswith("Directional")][0]
+    z = np.array(mi.traverse(mdir)["to_world"].matrix)[:3, 2]
+    np.testing.assert_allclose(d.direction, z / np.linalg.norm(z), atol=TOL)
+    np.testing.assert_allclose(d.direction, np.array([1, -1, 0.5]) / 1.5, atol=1e-12)   # by hand
+    assert np.allclose(d.irradiance, [2, 3, 4]) and c.type == "constant" and np.allclose(c.radiance, 0.25)
+    b = sc.shapes[0].bsdf
+    assert b.twosided and b.type == "plastic" and np.allclose(b.reflectance, [0.1, 0.2, 0.3])
+    assert b.int_ior == 1.49 and "TwoSided" in str(ref.shapes()[0].bsdf())
