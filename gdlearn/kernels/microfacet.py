@@ -80,13 +80,8 @@ def mf_pdf(dist, alpha, wi, m):
 
 
 @njit(cache=True)
-def erfinv(x):
-    """Inverse error function in float64: Giles' (2010) approximation refined by two Newton steps
-    on math.erf (numba has no erfinv). |x| >= 1 maps to +-inf."""
-    if x >= 1.0:
-        return math.inf
-    if x <= -1.0:
-        return -math.inf
+def erfinv_approx(x):
+    """Giles (2010) single-precision approximation of the inverse error function (|x| < 1)."""
     w = -math.log((1.0 - x) * (1.0 + x))
     if w < 5.0:
         w -= 2.5
@@ -110,20 +105,47 @@ def erfinv(x):
         p = 0.00943887047 + p * w
         p = 1.00167406 + p * w
         p = 2.83297682 + p * w
-    y = p * x
-    for _ in range(2):
+    return p * x
+
+
+@njit(cache=True)
+def erfinv(x):
+    """Inverse error function in float64 (numba has none): :func:`erfinv_approx` refined by Newton
+    steps; for |x| > 1/2 on log erfc(|y|) = log(1 - |x|) -- the complement keeps its relative
+    precision as |x| -> 1 (erf(y) - x would cancel) and the log makes the tail nearly quadratic so
+    Newton converges in a few steps. |x| >= 1 maps to +-inf."""
+    if x >= 1.0:
+        return math.inf
+    if x <= -1.0:
+        return -math.inf
+    ax = abs(x)
+    y = erfinv_approx(ax)
+    c = 1.0 - ax                         # exact for ax >= 0.5 (Sterbenz)
+    for _ in range(4):
         dy = 2.0 * _INV_SQRT_PI * math.exp(-y * y)
-        if dy > 0.0:
-            y -= (math.erf(y) - x) / dy
-    return y
+        if not dy > 0.0:
+            break
+        if ax > 0.5:
+            ec = math.erfc(y)
+            step = (math.log(ec) - math.log(c)) * ec / dy
+        else:
+            step = (ax - math.erf(y)) / dy
+        y += step
+        if abs(step) <= 1e-15 * y:
+            break
+    return y if x >= 0.0 else -y
 
 
 @njit(cache=True)
 def _visible_slopes_beckmann(cos_i, u1, u2):
     """Slopes of visible normals of the alpha = 1 Beckmann distribution seen from cos_i (Jakob 2014,
     "An improved visible normal sampling routine for the Beckmann distribution": numerical
-    inversion of the slope CDF in the erf domain). Mitsuba uses 3 Newton steps in float32; in
-    float64 we iterate to convergence so the samples follow the analytic pdf."""
+    inversion of the slope CDF  C(s) = 1 + erf(s) + tan_i exp(-s^2) / sqrt(pi)  (unnormalised)).
+
+    Mitsuba runs 3 Newton steps in the erf domain in float32. We do the same 3 steps with the
+    single-precision erfinv, then polish in the slope domain (dC/ds = 2 exp(-s^2)(1 - s tan_i) /
+    sqrt(pi), no erfinv needed) until float64 convergence, so the samples follow the analytic pdf.
+    """
     u1 = min(max(u1, 1e-6), 1.0 - 1e-6)
     u2 = min(max(u2, 1e-6), 1.0 - 1e-6)
     sin_i = math.sqrt(max(0.0, 1.0 - cos_i * cos_i))
@@ -136,19 +158,32 @@ def _visible_slopes_beckmann(cos_i, u1, u2):
         tail = _INV_SQRT_PI * tan_i * math.exp(-cot_i * cot_i)
     # initial guess: analytic solution for theta_i = pi/2
     x = maxval - (maxval + 1.0) * math.erf(math.sqrt(-math.log(u1)))
-    s = u1 * (1.0 + maxval + tail)       # normalised CDF target
-    for _ in range(12):
-        slope = erfinv(x)
-        value = 1.0 + x + _INV_SQRT_PI * tan_i * math.exp(-slope * slope) - s
+    target = u1 * (1.0 + maxval + tail)  # C(s) at the sample
+    lo, hi = -1.0 + 1e-16, 1.0 - 1e-16
+    for _ in range(3):
+        slope = erfinv_approx(min(max(x, lo), hi))
+        value = 1.0 + x + _INV_SQRT_PI * tan_i * math.exp(-slope * slope) - target
         deriv = 1.0 - slope * tan_i
-        if deriv == 0.0:
+        if deriv <= 0.0:
+            break
+        x = min(max(x - value / deriv, lo), hi)
+    slope = erfinv_approx(x)             # ~1e-7 accurate; the polish below converges quadratically
+    for _ in range(4):
+        e = math.exp(-slope * slope)
+        value = 1.0 + math.erf(slope) + _INV_SQRT_PI * tan_i * e - target
+        deriv = 2.0 * _INV_SQRT_PI * e * (1.0 - slope * tan_i)
+        if not deriv > 0.0:
             break
         step = value / deriv
-        x -= step
-        x = min(max(x, -1.0 + 1e-15), 1.0 - 1e-15)
-        if abs(step) < 1e-14:
+        if abs(step) > 0.25 * (1.0 + abs(slope)):   # far from the root: keep the erf-domain result
             break
-    return erfinv(x), erfinv(2.0 * u2 - 1.0)
+        slope -= step
+        if abs(step) < 1e-9 * (1.0 + abs(slope)):   # quadratic convergence: the error is now ~1e-18
+            break
+    y = 2.0 * u2 - 1.0                   # |y| < 1 - 2e-6: one Newton step polishes Giles' 1e-7 to 1e-14
+    z = erfinv_approx(y)
+    z -= (math.erf(z) - y) / (2.0 * _INV_SQRT_PI * math.exp(-z * z))
+    return slope, z
 
 
 @njit(cache=True)
