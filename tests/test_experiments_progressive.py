@@ -91,3 +91,21 @@ class _Interrupted(FakePrimal):
 def test_ctrl_c_keeps_what_was_accumulated():
     run = P.run(_Interrupted(seed=1), passes=50, reference=truth())
     assert run.interrupted and run.final.passes == 5 and run.final.image is not None
+
+
+def _slow_solver(frame):
+    import time
+    time.sleep(0.1)
+    return frame.primal
+
+
+def test_time_budget_reserves_the_final_reconstruction():
+    run = P.run(FakeGradient(seed=1), seconds=0.4, count=4, first=0.05, solver=_slow_solver)
+    snaps = run.snapshots
+    reserve = min(s.reconstruct_seconds for s in snaps[:-1])
+    assert len(snaps) >= 3 and reserve >= 0.1
+    # rendering stopped once render time + reserve reached the budget, not at the budget itself
+    # (a fake pass takes 2 ms, far less than the 0.1 s margin)
+    assert 0.4 - reserve <= snaps[-1].render_seconds < 0.4
+    assert P._reserve(snaps[:1], 0.4) == 0.0          # one measurement is not trusted
+    assert P._reserve(snaps, 0.1) == 0.05             # never more than half the budget
