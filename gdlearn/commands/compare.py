@@ -29,6 +29,9 @@ def add_parser(sub) -> None:
     budget = p.add_mutually_exclusive_group(required=True)
     budget.add_argument("--time", type=float, metavar="SECONDS", help="equal-time budget per run")
     budget.add_argument("--passes", type=int, help="equal-sample budget: passes per run")
+    p.add_argument("-D", "--define", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a <default> parameter of the scene file, e.g. -D res=64 "
+                        "(repeatable; as mitsuba -D)")
     p.add_argument("--seeds", type=int, default=1, help="independent runs per method (default 1)")
     p.add_argument("--reference", default="auto",
                    help="reference image file (.npz/.npy/.exr), 'mitsuba', or 'auto' (default: a "
@@ -59,6 +62,16 @@ def _toy(spec: str):
     return ToyScene(w, h)
 
 
+def _defines(items) -> tuple:
+    out = []
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name:
+            raise SystemExit(f"gdlearn compare: -D {item!r} is not NAME=VALUE (e.g. -D res=64)")
+        out.append((name.strip(), value.strip()))
+    return tuple(sorted(out))
+
+
 def _reference(args, scene, is_toy):
     from gdlearn.experiments import references as refs
     if is_toy and args.reference == "auto":
@@ -79,7 +92,7 @@ def run(args) -> int:
     from gdlearn.experiments import plots, study as st
 
     is_toy = args.scene == "toy" or args.scene.startswith("toy:")
-    scene = _toy(args.scene) if is_toy else args.scene
+    scene = _toy(args.scene) if is_toy else st.SceneFile(args.scene, _defines(args.define))
     methods = []
     for spec in (m.strip() for m in args.methods.split(",") if m.strip()):
         est, _, sol = spec.partition("+")

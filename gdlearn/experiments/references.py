@@ -74,6 +74,9 @@ def scene_digest(scene) -> str:
     """SHA-256 of a scene's content: a file and the files its ``filename="..."`` attributes name
     (meshes, textures), or the ``repr`` of a scene object (e.g. a toy scene dataclass)."""
     h = hashlib.sha256()
+    if hasattr(scene, "path") and hasattr(scene, "defaults"):     # a study.SceneFile
+        h.update(repr(sorted(scene.defaults)).encode())
+        scene = scene.path
     if isinstance(scene, (str, Path)):
         path = Path(scene)
         data = path.read_bytes()
@@ -158,6 +161,9 @@ def mitsuba_reference(path, spp: int = 1024, seeds=(101, 102, 103, 104), variant
     file's ``<default>`` parameters (``res=64``, ``max_depth=8``)."""
     from gdlearn.refs.mitsuba import mitsuba_mean_stderr
 
+    if hasattr(path, "path") and hasattr(path, "defaults"):       # a study.SceneFile
+        defaults = {**dict(path.defaults), **defaults}
+        path = path.path
     seeds = list(seeds)
     per = max(1, spp // len(seeds))
     key = cache_key(path, f"mitsuba:{variant}", per * len(seeds), seeds[0], seeds=seeds, **defaults)

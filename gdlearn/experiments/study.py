@@ -59,6 +59,28 @@ class Task:
     keep_images: str = "final"
 
 
+@dataclass(frozen=True)
+class SceneFile:
+    """A scene file with overrides of its ``<default>`` parameters, e.g.
+    ``SceneFile("scenes/cornell-box.xml", (("res", 32),))`` -- what ``gdlearn.scene.load(path,
+    res=32)`` and ``mitsuba.load_file(path, res=32)`` receive. Picklable, hashable."""
+    path: str
+    defaults: tuple = ()
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+    def load(self):
+        return _scene_loader()(str(self.path), **dict(self.defaults))
+
+
+def _scene_loader():
+    # The function, not the package attribute: importing the submodule gdlearn.scene.load rebinds
+    # gdlearn.scene.load to the module.
+    return importlib.import_module("gdlearn.scene.load").load
+
+
 def scene_name(scene) -> str:
     """A short name for records: a file's stem, or the object's ``name``."""
     if isinstance(scene, (str, Path)):
@@ -69,9 +91,12 @@ def scene_name(scene) -> str:
 
 
 def load_scene(scene):
-    """A scene file path is loaded with :func:`gdlearn.scene.load`; objects pass through."""
+    """A scene file path (or :class:`SceneFile`) is loaded with :func:`gdlearn.scene.load`; other
+    objects (e.g. a toy scene) pass through."""
     if isinstance(scene, (str, Path)):
-        return importlib.import_module("gdlearn.scene").load(str(scene))
+        return _scene_loader()(str(scene))
+    if isinstance(scene, SceneFile):
+        return scene.load()
     return scene
 
 
