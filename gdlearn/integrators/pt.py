@@ -21,6 +21,8 @@ from ..kernels.bvh import STACK_SIZE
 from ..kernels.camera import camera_ray
 from ..kernels.rng import rand
 from ..kernels.surface_path import radiance_path
+from ..kernels.volume_path import radiance_volpath
+from ..scene.effects import plan as effects_plan
 from ..scene.compile import compile_scene
 from .base import PassResult, ProgressiveIntegrator
 
@@ -29,11 +31,10 @@ UNBOUNDED = 1 << 30
 
 
 @njit(cache=True, parallel=True)
-def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
-    """Mean radiance of samples sample0 .. sample0+spp-1 of every pixel into ``out`` (H x W x 3);
-    ``bad[y]`` counts the non-finite samples dropped in row y."""
+def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+    """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
+    every pixel into ``out`` (H x W x 3); ``bad[y]`` counts the non-finite samples dropped in row y."""
     h, w = out.shape[0], out.shape[1]
-    cam = sa.camera
     inv = 1.0 / spp
     for y in prange(h):
         stack = np.empty(STACK_SIZE, dtype=np.int32)
@@ -44,8 +45,36 @@ def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
             a1 = 0.0
             a2 = 0.0
             for s in range(sample0, sample0 + spp):
-                o, d, tmax = camera_ray(cam, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, stack)
+                o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                c = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
+                    a0 += c[0]
+                    a1 += c[1]
+                    a2 += c[2]
+                else:
+                    nbad += 1
+            out[y, x, 0] = a0 * inv
+            out[y, x, 1] = a1 * inv
+            out[y, x, 2] = a2 * inv
+        bad[y] = nbad
+
+
+@njit(cache=True, parallel=True)
+def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+    """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
+    h, w = out.shape[0], out.shape[1]
+    inv = 1.0 / spp
+    for y in prange(h):
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        nbad = 0
+        for x in range(w):
+            key = y * w + x
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            for s in range(sample0, sample0 + spp):
+                o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                c = radiance_volpath(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
                 if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
                     a0 += c[0]
                     a1 += c[1]
@@ -71,10 +100,28 @@ class PathTracer(ProgressiveIntegrator):
     def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None,
                  max_depth=None, sa=None):
         super().__init__(scene, seed=seed, spp_per_pass=spp_per_pass)
-        self.sa = sa if sa is not None else compile_scene(scene)
-        md = scene.integrator.max_depth if max_depth is None else int(max_depth)
-        self.max_depth = UNBOUNDED if md < 0 else md
+        if max_depth is not None:       # the plan must see the depth that will be rendered
+            import copy
+            scene = copy.copy(scene)
+            scene.integrator = copy.copy(scene.integrator)
+            scene.integrator.max_depth = int(max_depth)
+            self.scene = scene
+        if isinstance(effects, str):
+            effects = [e.strip() for e in effects.split(",") if e.strip()]
+        self.plan = effects_plan(scene, effects)
+        self.sa = sa if sa is not None else compile_scene(scene, self.plan)
+        md = scene.integrator.max_depth
+        md = UNBOUNDED if md < 0 else md
+        if self.plan.max_interior >= 0:          # the requested effects need no longer paths
+            md = min(md, self.plan.max_interior + 1)
+        self.max_depth = md
         self.rr_depth = int(scene.integrator.rr_depth)
+        self.mask = int(self.plan.mask)
+        self.threshold = float(self.plan.roughness_threshold)
+        # the volume kernel runs only when the plan needs media (or volpath's null-interface rule)
+        has_null = any(s.bsdf.type == "null" for s in scene.shapes)
+        self.media = bool(self.plan.media) or (scene.integrator.type == "volpath" and has_null)
+        self.kernel = render_rows_volpath if self.media else render_rows_path
         self.threads = threads
         self.width, self.height = scene.sensor.film.width, scene.sensor.film.height
 
@@ -84,7 +131,8 @@ class PathTracer(ProgressiveIntegrator):
         if self.threads is not None:
             numba.set_num_threads(int(self.threads))
         try:
-            render_rows_path(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, out, bad)
+            self.kernel(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, self.mask, self.threshold,
+                        out, bad)
         finally:
             numba.set_num_threads(old)
         return int(bad.sum())

@@ -22,10 +22,12 @@ import math
 
 from numba import njit
 
-from .bsdf import bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample
+from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
+                   sampled_lobe_class, vertex_class)
 from .bvh import closest_hit
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
+from .pathclass import pc_class, pc_init, pc_push, pc_reachable
 from .rng import rand
 from .sampling import power_heuristic
 from .scene_query import occluded
@@ -62,9 +64,22 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 
 
+@njit(cache=True, inline="always")
+def _wanted(mask, state):
+    """Does the effects mask ask for the class of a path ending at a light after ``state``?"""
+    return (mask >> pc_class(state)) & 1 == 1
+
+
 @njit(cache=True)
-def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, stack):
-    """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb."""
+def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb.
+
+    ``mask``: effect-class bits to keep (``pathclass.ALL_MASK`` for the full image); the class of
+    every contribution is tracked with :mod:`gdlearn.kernels.pathclass` (vertex classes from the
+    BSDF with roughness ``threshold``) and a path stops once no wanted class is reachable.
+    A null BSDF passes the ray on; as in Mitsuba's ``path`` it still counts towards max_depth, but
+    it is not a vertex of the path's class.
+    """
     L0 = 0.0
     L1 = 0.0
     L2 = 0.0
@@ -73,13 +88,13 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, stack)
     prev_p = o
     prev_pdf = 1.0
     prev_delta = True
+    state = pc_init()
     depth = 0
-    tmin = 0.0
     while True:
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, tmin, tmax, stack)
+        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if prim < 0:
-            if sa.env >= 0:        # escaped: the constant emitter
+            if sa.env >= 0 and _wanted(mask, state):       # escaped: the constant emitter
                 le = eval_emitter(sa.emitters, sa.env, d, d)
                 w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, sa.env, prev_p, d, d))
                 L0 += beta[0] * le[0] * w
@@ -88,25 +103,26 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, stack)
             break
         p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
         em = sa.prim_info[prim, INFO_EMITTER]
-        if em >= 0:                # emission seen by this segment, MIS against NEE of the previous vertex
+        if em >= 0 and _wanted(mask, state):   # emission seen by this segment, MIS against NEE before it
             le = eval_emitter(sa.emitters, em, ns, d)
             if le[0] + le[1] + le[2] > 0.0:
                 w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, em, prev_p, p, ns))
                 L0 += beta[0] * le[0] * w
                 L1 += beta[1] * le[1] * w
                 L2 += beta[2] * le[2] * w
-        if max_depth >= 0 and depth + 1 >= max_depth:
+        if depth + 1 >= max_depth:
             break
         mat = sa.materials[sa.prim_info[prim, INFO_MAT]]
         s, tt = coordinate_system(ns)
         wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
-        if not bsdf_is_delta_only(mat):
+        null = bsdf_is_null(mat)
+        if not bsdf_is_delta_only(mat) and _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
             c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack)
             L0 += beta[0] * c[0]
             L1 += beta[1] * c[1]
             L2 += beta[2] * c[2]
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, rand(seed, key, sample, dim(depth, D_LOBE)),
-                                               rand(seed, key, sample, dim(depth, D_BSDF_U1)),
+        u_lobe = rand(seed, key, sample, dim(depth, D_LOBE))
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand(seed, key, sample, dim(depth, D_BSDF_U1)),
                                                rand(seed, key, sample, dim(depth, D_BSDF_U2)))
         if not pdf > 0.0:
             break
@@ -114,9 +130,13 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, stack)
         eta *= bsdf_eta(mat, wi, wo)
         d = to_world(wo, s, tt, ns)
         o = offset_origin(p, ng, d)
-        prev_p = p
-        prev_pdf = pdf
-        prev_delta = is_delta
+        if not null:
+            state = pc_push(state, sampled_lobe_class(mat, wi, u_lobe, is_delta, threshold))
+            if not pc_reachable(state, mask):
+                break
+            prev_p = p
+            prev_pdf = pdf
+            prev_delta = is_delta
         depth += 1
         bmax = max3(beta)
         if depth >= rr_depth:
