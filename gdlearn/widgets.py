@@ -67,7 +67,7 @@ def error_map_png(image, reference) -> bytes:
     from gdlearn.experiments.metrics import relmse_map
 
     err = relmse_map(image, reference)
-    fig, ax = plt.subplots(figsize=(3.4, 2.8))
+    fig, ax = plt.subplots(figsize=(3.2, 2.6))
     shown = ax.imshow(np.log10(np.maximum(err, 1e-8)), cmap="magma", vmin=-6, vmax=1,
                       interpolation="nearest")
     ax.set_axis_off()
@@ -122,22 +122,26 @@ def compare_images(images: Mapping[str, np.ndarray], reference=None, *, exposure
             label += f" &nbsp; relMSE = {err:.3g}"
             rows.append(f"<tr><td>{name}</td><td style='text-align:right'>{err:.4g}</td></tr>")
             parts.append(w.Image(value=error_map_png(img, reference), format="png"))
-        slides.append(w.VBox([w.HTML(label), w.HBox(parts)]))
+        # wrap: image + error map must not overflow (and be clipped by) a narrow book column
+        slides.append(w.VBox([w.HTML(label), w.HBox(parts, layout=w.Layout(flex_flow="row wrap"))]))
     stack = w.Stack(slides, selected_index=0)
     buttons = w.ToggleButtons(options=names, index=0, description="show")
     slider = w.IntSlider(value=0, min=0, max=len(names) - 1, description="flip",
                          readout=False, continuous_update=True)
     w.jslink((buttons, "index"), (stack, "selected_index"))
     w.jslink((slider, "value"), (buttons, "index"))
-    head = [w.HTML(f"<h4>{title}</h4>")] if title else []
+    head = [w.HTML(f"<b>{title}</b>")] if title else []
     if rows:
         head.append(w.HTML("<table><tr><th>method</th><th>relMSE</th></tr>" + "".join(rows)
                            + "</table>"))
     return w.VBox(head + [buttons, slider, stack])
 
 
-def _frame_label(i: int, frame, reference) -> str:
-    if hasattr(frame, "primal"):
+def _frame_label(i: int, frame, reference) -> tuple[str, np.ndarray]:
+    if getattr(frame, "image", None) is not None:         # an experiments.progressive Snapshot
+        text = f"{frame.spp} spp, {frame.seconds:.2f} s"
+        img = frame.image
+    elif hasattr(frame, "primal"):                        # an integrators Frame
         text = f"pass {frame.passes}: {frame.spp} spp, {frame.elapsed:.2f} s"
         img = frame.primal
     else:
@@ -153,8 +157,8 @@ def progressive_viewer(frames: Sequence, reference=None, *, exposure: float = 0.
                        interval_ms: int = 600):
     """Step (slider) or play (button) through a progressive render.
 
-    ``frames``: :class:`gdlearn.integrators.Frame` objects (for instance, copies kept every few passes
-    of ``integrator.frames()``) or plain H x W x 3 images. Each frame is labelled with its samples
+    ``frames``: :class:`gdlearn.integrators.Frame` objects, snapshots of
+    :func:`gdlearn.experiments.progressive.run` (``keep_images="all"``), or plain H x W x 3 images. Each frame is labelled with its samples
     per pixel and wall time, plus relMSE when a ``reference`` is given.
     """
     import ipywidgets as w
