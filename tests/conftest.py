@@ -1,0 +1,90 @@
+"""Shared test machinery. Its main job: collect the book's chapters (MyST-markdown notebooks, which
+nbmake cannot collect) so that the README's test command executes every chapter in quick mode.
+
+Any test that takes a ``chapter`` argument is run once per notebook chapter listed in _toc.yml
+(a chapter without a jupytext header, such as the status page, is plain Markdown and is skipped);
+:func:`execute_chapter` runs one with jupytext + nbclient under ``GDLEARN_QUICK=1``, in book/ as
+Jupyter Book does, so the tests execute exactly what the book build executes.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+BOOK = ROOT / "book"
+#: Seconds one cell may run in quick mode before the test fails (quick chapters take ~10-60 s in all).
+CELL_TIMEOUT = 300
+
+
+def toc_files() -> list[Path]:
+    """Every file _toc.yml lists (root first), in book order, as absolute paths with suffix."""
+    import yaml
+
+    toc = yaml.safe_load((ROOT / "_toc.yml").read_text())
+    names = [toc["root"]]
+
+    def walk(entries):                 # jb-book: chapters -> sections, or parts -> chapters
+        for entry in entries or []:
+            if "file" in entry:
+                names.append(entry["file"])
+            walk(entry.get("sections"))
+
+    walk(toc.get("chapters"))
+    for part in toc.get("parts", []):
+        walk(part.get("chapters"))
+    out = []
+    for name in names:
+        path = ROOT / name
+        out.append(path if path.suffix else path.with_suffix(".md"))
+    return out
+
+
+def is_notebook(path: Path) -> bool:
+    """A MyST notebook starts with a YAML header naming a jupytext format and a kernel."""
+    head = path.read_text(encoding="utf-8")[:600]
+    return head.startswith("---") and "jupytext" in head and "kernelspec" in head
+
+
+def notebook_chapters() -> list[Path]:
+    return [p for p in toc_files() if p.suffix == ".md" and p.is_file() and is_notebook(p)]
+
+
+def pytest_generate_tests(metafunc):
+    if "chapter" in metafunc.fixturenames:
+        chapters = notebook_chapters()
+        metafunc.parametrize("chapter", chapters, ids=[str(p.relative_to(ROOT)) for p in chapters])
+
+
+def execute_chapter(path: Path, quick: bool = True):
+    """Execute one chapter like the book build does (cwd book/, gdlearn importable); return
+    (notebook with outputs, wall seconds). Raises nbclient's CellExecutionError on a failing cell."""
+    import jupytext
+    from nbclient import NotebookClient
+
+    nb = jupytext.read(path)
+    env_before = dict(os.environ)
+    os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+    if quick:
+        os.environ["GDLEARN_QUICK"] = "1"
+    else:
+        os.environ.pop("GDLEARN_QUICK", None)
+    # The kernel is this interpreter (the .venv), so the chapter sees the same packages as the tests.
+    client = NotebookClient(nb, timeout=CELL_TIMEOUT, kernel_name="python3",
+                            resources={"metadata": {"path": str(path.parent)}})
+    t0 = time.perf_counter()
+    try:
+        client.execute()
+    finally:
+        os.environ.clear()
+        os.environ.update(env_before)
+    return nb, time.perf_counter() - t0
+
+
+@pytest.fixture
+def python_exe() -> str:
+    return sys.executable

@@ -1,0 +1,98 @@
+"""Exercises never rot: every exercise's tests pass on its reference solution, fail on the untouched
+stub with readable feedback, and catch a plausible wrong answer.
+
+The exercise tests run in a child process (as `gdlearn check` would), so their imports and pytest's
+state stay apart from this test session.
+"""
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from gdlearn.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
+
+ROOT = Path(__file__).resolve().parent.parent
+EXERCISES = list_exercises()
+
+
+def _env(**extra):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    env.update(extra)
+    return env
+
+
+def _check(name: str, solution: bool, exercises_dir: Path | None = None):
+    """Run gdlearn.exercises.check in a child; return (exit status, printed report)."""
+    patch = ""
+    if exercises_dir is not None:
+        patch = (f"e.EXERCISES_DIR = pathlib.Path({str(exercises_dir)!r}); "
+                 f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; ")
+    code = ("import pathlib, sys; import gdlearn.exercises as e; " + patch +
+            f"r = e.check({name!r}, solution={solution}); print(r.text()); sys.exit(0 if r.ok else 1)")
+    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(), capture_output=True,
+                         text=True, timeout=300)
+    return res.returncode, res.stdout + res.stderr
+
+
+def test_there_is_an_exercise():
+    assert "cosine-hemisphere" in EXERCISES
+
+
+@pytest.mark.parametrize("name", EXERCISES)
+def test_exercise_has_stub_readme_tests_and_solution(name):
+    folder, mod = EXERCISES_DIR / name, module_name(name)
+    for path in (folder / "README.md", folder / f"{mod}.py", folder / f"test_{mod}.py", SOLUTIONS_DIR / f"{mod}.py"):
+        assert path.is_file(), f"exercise {name}: {path} is missing"
+
+
+@pytest.mark.parametrize("name", EXERCISES)
+def test_solution_passes_its_exercise_tests(name):
+    # Plain pytest on the exercise folder, pointed at the solution: exactly what a maintainer runs.
+    res = subprocess.run([sys.executable, "-m", "pytest", str(EXERCISES_DIR / name), "-q", "-p",
+                          "no:cacheprovider", "-o", "addopts=", "--rootdir", str(EXERCISES_DIR)],
+                         cwd=ROOT, env=_env(**{TARGET_ENV: "solution"}), capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, f"the solution of {name} fails its tests:\n{res.stdout[-3000:]}"
+
+
+@pytest.mark.parametrize("name", EXERCISES)
+def test_stub_fails_with_readable_feedback(name):
+    rc, out = _check(name, solution=False)
+    assert rc == 1, f"the untouched stub of {name} should fail its checks:\n{out}"
+    assert "FAIL" in out and "checks passed" in out, out
+    assert "Traceback" not in out, f"feedback must not be a traceback wall:\n{out}"
+
+
+def test_wrong_distribution_is_caught(tmp_path):
+    """A uniform-hemisphere warp with a self-consistent pdf: unit vectors, pdf integrates to 1, the
+    estimator is even unbiased -- but it is not cosine-weighted, and the checks must say so."""
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / "cosine-hemisphere", work / "cosine-hemisphere")
+    (work / "cosine-hemisphere" / "cosine_hemisphere.py").write_text(textwrap.dedent("""
+        import math
+        import numpy as np
+
+        def square_to_cosine_hemisphere(u1, u2):
+            z = u1; r = math.sqrt(max(0.0, 1 - z * z)); phi = 2 * math.pi * u2
+            return (r * math.cos(phi), r * math.sin(phi), z)
+
+        def cosine_hemisphere_pdf(w):
+            return 1 / (2 * math.pi) if w[2] >= 0 else 0.0
+
+        def irradiance_estimate(sky, n, seed):
+            u = np.random.default_rng(seed).random((n, 2))
+            ws = [square_to_cosine_hemisphere(a, b) for a, b in u]
+            return sum(sky(w) * w[2] / cosine_hemisphere_pdf(w) for w in ws) / n
+        """))
+    rc, out = _check("cosine-hemisphere", solution=False, exercises_dir=work)
+    assert rc == 1, out
+    failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
+    assert any("cosine law" in line for line in failed), out
+    assert any("pdf(w) = cos(theta) / pi" in line for line in failed), out
+    assert any("exactly, for every seed" in line for line in failed), out
+    assert not any("unit vectors" in line for line in failed), out        # those parts are right
