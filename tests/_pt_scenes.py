@@ -76,15 +76,25 @@ def cornell_box(res=32, max_depth=8, integrator="path", medium=None):
     return Scene(Integrator(integrator, max_depth), sensor, sh)
 
 
-def furnace(rho, le, res=8, max_depth=-1, rr_depth=5, inside_medium=None):
+def furnace(rho, le, res=8, max_depth=-1, rr_depth=5, medium=None):
     """Camera at the centre of a closed sphere of albedo rho that emits le on its inside.
 
     The sphere's normals are flipped so they face the camera: a one-sided emitter and a one-sided
-    diffuse BSDF then both act on the inside. Every path sees L = le / (1 - rho)."""
+    diffuse BSDF then both act on the inside. Every path sees L = le / (1 - rho). With ``medium``
+    the sphere is filled with it (and the camera sits in it); since the normals point inwards, the
+    inside is the sphere's *exterior* side in Mitsuba's convention."""
     sensor = Sensor(fov=60.0, to_world=lookat((0, 0, 0), (0, 0, 1), (0, 1, 0)), film=Film(res, res, "box"),
-                    medium=inside_medium)
+                    medium=medium)
     s = Shape("sphere", scale(1.0), BSDF("diffuse", reflectance=rgb(rho)),
-              emitter=Emitter("area", radiance=rgb(le)), flip_normals=True,
-              interior=inside_medium, exterior=None)
-    return Scene(Integrator("volpath" if inside_medium is not None else "path", max_depth, rr_depth),
-                 sensor, [s])
+              emitter=Emitter("area", radiance=rgb(le)), flip_normals=True, interior=None, exterior=medium)
+    return Scene(Integrator("volpath" if medium is not None else "path", max_depth, rr_depth), sensor, [s])
+
+
+def single_scatter_box(sigma_t, albedo, g, light=(0.3, 0.2, 0.1), intensity=1.0, max_depth=-1):
+    """A 1x1-pixel camera at (0, 0, 3) looking down -z with a tiny field of view (all its rays are
+    the z axis to ~1e-5) through a null-bounded medium cube [-1, 1]^3 with a point light inside."""
+    med = Medium(sigma_t=rgb(*sigma_t), albedo=rgb(albedo), phase="hg" if g else "isotropic", g=g)
+    sensor = Sensor(fov=1e-3, to_world=lookat((0, 0, 3), (0, 0, 0), (0, 1, 0)), film=Film(1, 1, "box"))
+    cube = Shape("cube", np.eye(4), BSDF("null"), interior=med, exterior=None)
+    lamp = Emitter("point", intensity=rgb(intensity), position=np.array(light, dtype=float))
+    return Scene(Integrator("volpath", max_depth), sensor, [cube], emitters=[lamp])
