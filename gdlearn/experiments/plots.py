@@ -54,6 +54,8 @@ def convergence(study, scene=None, metric: str = "relmse", ax=None, floor: bool 
     if floor and floors and metric.startswith("relmse") and np.mean(floors) > 0:
         ax.axhline(float(np.mean(floors)), color="k", ls="--", lw=1,
                    label="reference noise floor")
+    from matplotlib.ticker import NullFormatter
+    ax.xaxis.set_minor_formatter(NullFormatter())    # short ranges would label every minor tick
     ax.set_xlabel("time (s, JIT compile excluded)")
     ax.set_ylabel(metric)
     ax.set_title(f"{scene}: {metric} vs time")
@@ -75,7 +77,7 @@ def image_grid(images: dict, reference=None, exposure: float = 1.0, axes=None, t
             cap += f"\nrelMSE {metrics.relmse(img, reference):.3g}"
         ax.set_title(cap, fontsize=9)
         ax.axis("off")
-    if reference is not None:
+    if reference is not None and len(axes) > len(images):
         axes[len(images)].imshow(display(reference, exposure))
         axes[len(images)].set_title("reference", fontsize=9)
         axes[len(images)].axis("off")

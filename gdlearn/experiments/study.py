@@ -57,6 +57,7 @@ class Task:
     reference: np.ndarray | None = None
     reference_floor: float | None = None
     keep_images: str = "final"
+    first: float | None = None           # first snapshot time (time budgets; default seconds/100)
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,7 @@ def run_task(task: Task) -> dict:
     m = task.method
     integ = make_integrator(m.estimator, scene, task.seed, task.spp_per_pass, **dict(m.options))
     run = progressive.run(integ, seconds=task.seconds, passes=task.passes, count=task.count,
+                          first=task.first,
                           solver=m.solver,
                           reference=task.reference, reference_floor=task.reference_floor,
                           keep_images=task.keep_images)
@@ -204,14 +206,15 @@ def _reference_arrays(ref):
 
 def equal_time(methods, scenes, *, seconds: float | None = None, passes: int | None = None,
                seeds=1, solver=None, references=None, executor=None, count: int = 12,
-               spp_per_pass: int = 1, keep_images: str = "final") -> Study:
+               spp_per_pass: int = 1, keep_images: str = "final", first: float | None = None) -> Study:
     """Run every method on every scene for every seed under one budget; return a :class:`Study`.
 
     ``methods``: specs for :meth:`Method.parse` (``"pt"``, ``"gpt+l1"``, classes, Methods).
     ``seeds``: a count (seeds 0..N-1) or a list. ``references``: scene name -> reference (array or
     :class:`~gdlearn.experiments.references.Reference`), or one reference for a single scene.
     ``executor``: anything :func:`~gdlearn.experiments.executors.get_executor` accepts, default a
-    one-worker local process pool.
+    one-worker local process pool. ``count`` and ``first``: snapshots per run and the time of the
+    first one (:func:`~gdlearn.experiments.progressive.time_schedule`).
     """
     methods = [Method.parse(m, solver) for m in methods]
     scenes = list(scenes) if isinstance(scenes, (list, tuple)) else [scenes]
@@ -225,7 +228,7 @@ def equal_time(methods, scenes, *, seconds: float | None = None, passes: int | N
         for m in methods:
             for sd in seeds:
                 tasks.append(Task(m, sc, int(sd), seconds, passes, count, spp_per_pass, img, floor,
-                                  keep_images))
+                                  keep_images, first))
     ex = get_executor(executor)
     try:
         results = ex.map(run_task, tasks)
