@@ -49,26 +49,26 @@ def fresnel_diffuse_reflectance(eta):
     return 0.919317 + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 - inv * 1.36881))))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reflect(wi):
     """Mirror reflection about the normal +z."""
     return (-wi[0], -wi[1], wi[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reflect_m(wi, m):
     """Mirror reflection of wi about the microfacet normal m: 2 (wi.m) m - wi."""
     d = 2.0 * (wi[0] * m[0] + wi[1] * m[1] + wi[2] * m[2])
     return (m[0] * d - wi[0], m[1] * d - wi[1], m[2] * d - wi[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def refract(wi, cos_theta_t, eta_ti):
     """Refraction about +z, with cos_theta_t and eta_ti from :func:`fresnel_dielectric`."""
     return (-eta_ti * wi[0], -eta_ti * wi[1], cos_theta_t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def refract_m(wi, m, cos_theta_t, eta_ti):
     """Refraction of wi through the microfacet normal m: m ((wi.m) eta_ti + cos_t) - wi eta_ti."""
     s = (wi[0] * m[0] + wi[1] * m[1] + wi[2] * m[2]) * eta_ti + cos_theta_t

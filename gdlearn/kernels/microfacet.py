@@ -19,7 +19,7 @@ ALPHA_MIN = 1e-4
 _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def clamp_alpha(alpha):
     return max(alpha, ALPHA_MIN)
 
