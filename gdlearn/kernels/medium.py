@@ -26,21 +26,21 @@ from numba import njit
 from gdlearn.kernels.layout import MED_ALBEDO, MED_G, MED_SIGMA_T
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def transmittance(sigma_t, t):
     """T(t) = exp(-sigma_t t) per channel (Jarosz et al. 2008, Eq. 2); t = inf gives 0 (or 1 where
     sigma = 0)."""
     return (_tr1(sigma_t[0], t), _tr1(sigma_t[1], t), _tr1(sigma_t[2], t))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tr1(sigma, t):
     if sigma == 0.0:
         return 1.0            # avoids 0 * inf = nan for an unbounded segment in a clear channel
     return math.exp(-sigma * t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sample_distance_1(sigma, t_max, u):
     """Single-channel free-flight sampling: t = -log1p(-u) / sigma.
 
@@ -56,7 +56,7 @@ def sample_distance_1(sigma, t_max, u):
     return t_max, False, math.exp(-sigma * t_max)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def distance_pdf(sigma_t, t):
     """Spectral-MIS collision density (1/3) sum_c sigma_c exp(-sigma_c t)."""
     s = 0.0
@@ -66,7 +66,7 @@ def distance_pdf(sigma_t, t):
     return s / 3.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pass_probability(sigma_t, t_max):
     """Spectral-MIS probability of no collision before t_max: (1/3) sum_c exp(-sigma_c t_max)."""
     return (_tr1(sigma_t[0], t_max) + _tr1(sigma_t[1], t_max) + _tr1(sigma_t[2], t_max)) / 3.0
@@ -121,7 +121,7 @@ def sample_distance_truncated_1(sigma, t_max, u):
     return t, sigma * math.exp(-sigma * t) / (-em)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def medium_params(med):
     """(sigma_t, albedo, g) of a medium row (columns layout.MED_*)."""
     return ((med[MED_SIGMA_T], med[MED_SIGMA_T + 1], med[MED_SIGMA_T + 2]),

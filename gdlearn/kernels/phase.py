@@ -22,7 +22,7 @@ from gdlearn.kernels.vec import coordinate_system
 INV_FOUR_PI = 0.25 / math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def hg_eval(g, cos_theta):
     """HG density for cos_theta = dot(wi, wo) (Mitsuba's convention, see module doc). Equals the pdf."""
     if g >= 0.0:
