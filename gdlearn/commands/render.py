@@ -73,6 +73,10 @@ def run(args) -> int:
     spp = args.spp if (args.spp is not None or args.time is not None) else scene.sensor.spp
     t0 = time.perf_counter()
     try:
+        integ.warmup()          # JIT first, so the message below means "samples are being taken"
+        print(f"gdlearn render: compiled in {time.perf_counter() - t0:.2f} s; rendering "
+              f"{f'{spp} spp' if spp else ''}{' / ' if spp and args.time else ''}"
+              f"{f'{args.time} s' if args.time else ''} (Ctrl-C saves what is done)", file=sys.stderr, flush=True)
         frame = render(integ, spp=spp, seconds=args.time, progress=not args.no_progress)
     except KeyboardInterrupt:      # during JIT compilation: nothing accumulated yet
         print("gdlearn render: interrupted before the first pass; nothing written", file=sys.stderr)
