@@ -228,6 +228,11 @@ def material_row(bsdf, width: int | None = None) -> np.ndarray:
     if not (bsdf.int_ior > 0 and bsdf.ext_ior > 0):
         raise ValueError(f"int_ior / ext_ior must be > 0 (got {bsdf.int_ior}, {bsdf.ext_ior}); fix: "
                          "use positive indices of refraction")
+    if t in (L.ROUGHDIELECTRIC, L.ROUGHPLASTIC) and bsdf.int_ior == bsdf.ext_ior:
+        # as Mitsuba 3: an index-matched rough interface maps every microfacet to the same refracted
+        # direction (a delta hidden in a "rough" lobe, infinite pdf)
+        raise ValueError(f"{bsdf.type} needs int_ior != ext_ior (both {bsdf.int_ior}); fix: use "
+                         "'dielectric' / 'plastic' for an index-matched interface, or change an ior")
     row[L.MAT_ETA] = float(bsdf.int_ior) / float(bsdf.ext_ior)
     row[L.MAT_NONLINEAR] = 1.0 if bsdf.nonlinear else 0.0
     return prepare_material_row(row)
