@@ -23,7 +23,8 @@ def built_book(tmp_path_factory):
     config = yaml.safe_load((ROOT / "_config.yml").read_text())
     config["execute"]["execute_notebooks"] = "force"
     config["execute"].pop("cache", None)
-    (out / "_config.yml").write_text(yaml.safe_dump(config))
+    # sort_keys=False: nb_ipywidgets_js is ordered (require.js must load before embed-amd.js)
+    (out / "_config.yml").write_text(yaml.safe_dump(config, sort_keys=False))
     env = dict(os.environ, GDLEARN_QUICK="1")
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     jb = Path(sys.executable).with_name("jupyter-book")
