@@ -41,8 +41,11 @@ ALPHA = 1e-3
 #: of these scenes is noisy (per-sample relative sd ~4 in the Cornell box, ~7 in the fog box: a few
 #: pixels straddle the light's edge), so a tighter fixed bound would need far more samples.
 REL_BOUND = 0.03
-#: gdlearn's side: K independent seeds; spp per seed from the reference's own noise (see _gd_spp).
-GD_SEEDS = (1, 2, 3, 4)
+#: gdlearn's side: K independent batches (passes of one progressive render, whose per-pass means are
+#: independent by the counter-based RNG: sample indices never repeat); spp per batch from the
+#: reference's own noise (see _gd_spp). 16 batches: the per-pixel standard error has 15 degrees of
+#: freedom, enough to stay honest for the heavy-tailed caustic paths (4 seeds were not).
+GD_BATCHES = 16
 #: Target relative standard error of gdlearn's image mean: with the reference's (<= 0.4 %) the
 #: combined error stays < 1 %, i.e. REL_BOUND is >= 3 standard errors wide.
 GD_REL_SE = 0.008
@@ -54,9 +57,9 @@ KNOWN_REFERENCE_BIAS = {
                            "comparison would flag Mitsuba, not gdlearn. tests of the analytic furnace "
                            "value cover this scene.",
 }
-#: Mitsuba stand-in for the harness tests (it plays gdlearn's part: same seed count, same spp rule);
+#: Mitsuba stand-in for the harness tests (it plays gdlearn's part: same batch count, same spp rule);
 #: its seeds are independent of the references' (1000...).
-MI_SEEDS = GD_SEEDS
+MI_SEEDS = tuple(range(1, GD_BATCHES + 1))
 
 
 def _check_rel_bound_has_power(a: ImageStats, b: ImageStats):
@@ -68,14 +71,17 @@ def _check_rel_bound_has_power(a: ImageStats, b: ImageStats):
 
 
 def _gd_spp(ref: ImageStats, settings: dict) -> int:
-    """Samples per pixel per seed so that gdlearn's image mean has relative standard error ~GD_REL_SE,
+    """Samples per pixel per batch so that gdlearn's image mean has relative standard error ~GD_REL_SE,
     assuming gdlearn's per-sample noise equals Mitsuba's (measured from the reference itself). Kept
-    in [32, 2048] so that no case costs more than a few seconds of rendering."""
+    per batch in [64, 512]: at least 64 because Student's t needs batch means that are not too skewed
+    -- with 16 spp per batch, Mitsuba against its own reference on the caustics box (rare, bright
+    paths through the glass) fails (mean z^2 2.6-3.4), at 64 it passes (1.0-1.4); at most 512 so
+    that no case costs more than a few seconds of rendering."""
     n = ref.mean.shape[0] * ref.mean.shape[1]
     rel_se_ref = np.sqrt(ref.var.sum((0, 1))) / n / np.maximum(ref.mean.mean((0, 1)), 1e-12)
     per_sample_sd = float(rel_se_ref.max()) * np.sqrt(n * len(settings["seeds"]) * settings["spp"])
     spp_total = (per_sample_sd / GD_REL_SE) ** 2 / n
-    return int(np.clip(32 * np.ceil(spp_total / len(GD_SEEDS) / 32), 32, 2048))
+    return int(np.clip(8 * np.ceil(spp_total / GD_BATCHES / 8), 64, 512))
 
 
 def _reference(name: str) -> ImageStats:
@@ -103,6 +109,38 @@ def test_reference_present_and_fresh(name):
     assert ref.mean.mean() > 0, f"{name}: the Mitsuba reference is black; is the scene lit?"
 
 
+# -- the statistics, on synthetic images whose truth is known ------------------------------------------
+def _synthetic(rng, truth, sd, k):
+    return ImageStats.from_samples(truth + sd * rng.standard_normal((k,) + truth.shape))
+
+
+def test_compare_false_alarm_rate_on_synthetic_noise():
+    """Two unbiased estimates of one image (heteroscedastic Gaussian noise, K = 4 vs K = 8 images)
+    pass at the family-wise rate 1 - alpha: with alpha = 0.1 over 300 trials the false alarms are
+    Binomial(300, <= 0.1) (Bonferroni is conservative); 0.1 + 3 sd = 0.152 bounds the rate."""
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(0.05, 1.0, (32, 32, 3))
+    sd = 0.5 * truth * rng.uniform(0.2, 2.0, truth.shape)
+    alarms = sum(not compare(_synthetic(rng, truth, sd, 4), _synthetic(rng, truth, sd, 8), alpha=0.1,
+                             rel_bound=1.0).ok for _ in range(300))
+    assert alarms / 300 < 0.1 + 3 * np.sqrt(0.1 * 0.9 / 300), alarms
+
+
+def test_compare_detects_small_bias_on_synthetic_noise():
+    """A 3 % bias in one 4x4 block (z ~ 10) is found, at that block; zero noise with a difference is
+    infinitely significant; identical noise-free images pass."""
+    rng = np.random.default_rng(8)
+    truth = np.ones((32, 32, 3))
+    biased = truth.copy()
+    biased[8:12, 8:12] *= 1.03
+    sd = 0.02    # block se: test 0.02/sqrt(4*16), ref 0.02/sqrt(8*16): combined 0.0031 -> z = 0.03/0.0031 ~ 10
+    c = compare(_synthetic(rng, biased, sd, 4), _synthetic(rng, truth, sd, 8), rel_bound=1.0)
+    assert not c.blocks_ok and c.worst()["rows"] == (8, 12) and c.worst()["cols"] == (8, 12)
+    exact = ImageStats(truth, np.zeros_like(truth), np.ones_like(truth))
+    assert compare(exact, exact).ok
+    assert not compare(ImageStats(biased, exact.var, exact.dof), exact).ok
+
+
 # -- the harness, proven on Mitsuba alone ------------------------------------------------------------
 _mi_cache: dict = {}
 
@@ -122,7 +160,7 @@ def _mitsuba_standin(name: str, variant: str = "scalar_rgb", **extra) -> ImageSt
 
 @needs_mitsuba
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["cornell-box", "cornell-box.direct", "fog-box.direct"])
+@pytest.mark.parametrize("name", ["cornell-box", "cornell-box.direct", "fog-box.direct", "caustics-box"])
 def test_harness_accepts_independent_mitsuba_render(name):
     """Mitsuba at other seeds passes, and its z-scores are calibrated: mean z^2 ~ 1. With 64 blocks
     whose R, G, B z are strongly correlated (~64 independent values), mean z^2 has sd ~ sqrt(2/64)
@@ -196,7 +234,7 @@ _gd_cache: dict = {}
 
 def _gdlearn_render(name: str) -> ImageStats:
     try:
-        from gdlearn.integrators import get, make, render
+        from gdlearn.integrators import get, make
         from gdlearn.scene.load import load
         get("pt")
     except (ImportError, AttributeError) as err:
@@ -209,7 +247,14 @@ def _gdlearn_render(name: str) -> ImageStats:
         opts = dict(spp_per_pass=spp, threads=2)
         if case.effects:
             opts["effects"] = list(case.effects)
-        imgs = [render(make("pt", scene, seed=s, **opts), spp=spp).primal for s in GD_SEEDS]
+        integ = make("pt", scene, seed=1, **opts)
+        integ.warmup()
+        imgs, prev = [], None
+        for _ in range(GD_BATCHES):     # this pass's mean, recovered from the running mean
+            f = integ.step()
+            imgs.append(f.primal * f.spp - (prev.primal * prev.spp if prev else 0.0))
+            imgs[-1] /= f.spp - (prev.spp if prev else 0)
+            prev = f
         _gd_cache[name] = ImageStats.from_samples(imgs)
     return _gd_cache[name]
 
