@@ -145,3 +145,16 @@ def test_thin_and_dense_media_accuracy():
     # mixed dense / clear channels: finite, bounded weights
     t, sc, w = _rgb_many((1e4, 0.0, 1.0), (0.5, 0.6, 0.7), 5.0, u)
     assert np.all(np.isfinite(w)) and np.all(w >= 0) and np.all(w <= 3.0 + 1e-12)
+
+
+def test_unbounded_segment():
+    """A ray that leaves the scene inside a medium (t_max = inf): channels with sigma > 0 always
+    collide; a clear channel passes with weight T / P = 1 / (1/3) in that channel only."""
+    u = np.random.default_rng(6).random((3000, 2))
+    t, sc, w = _rgb_many((1.0, 0.0, 2.0), (0.5, 0.5, 0.5), math.inf, u)
+    assert np.all(np.isfinite(w))
+    picked_clear = (np.minimum((u[:, 0] * 3).astype(int), 2) == 1)
+    assert np.all(sc == ~picked_clear) and np.all(np.isfinite(t[sc]))
+    np.testing.assert_allclose(w[~sc], np.tile([0.0, 3.0, 0.0], ((~sc).sum(), 1)))
+    t, sc, w = _rgb_many((1.0, 1.0, 1.0), (0.5, 0.5, 0.5), math.inf, u)
+    assert sc.all()

@@ -1,12 +1,13 @@
 """Homogeneous participating media: transmittance and free-flight distance sampling.
 
 A homogeneous medium has extinction sigma_t (RGB, 1/length) and single-scattering albedo
-a = sigma_s / sigma_t. Along a ray (Jarosz et al. 2008, Sec. 3, Eq. 1-4):
+a = sigma_s / sigma_t. Along a ray (Jarosz et al. 2008, Sec. 2, Eq. 1 and Table 1):
 
-    T(t) = exp(-sigma_t t)                                   transmittance (Beer-Lambert, Eq. 2)
+    T(t) = exp(-sigma_t t)                                   transmittance T_r = e^-tau (Table 1)
     L(x, w) = T(s) L(x_s) + int_0^s T(t) sigma_s L_i(x_t) dt  volume rendering equation (Eq. 1)
 
-Distance sampling draws t with density pdf(t) = sigma_t T(t) (Eq. 4's free-flight distribution),
+with L_i the in-scattered radiance through the normalised phase function (Eq. 2). The path tracer
+estimates the integral of Eq. 1 by sampling t with the free-flight density pdf(t) = sigma_t T(t),
 by inversion t = -log(1 - u) / sigma_t; a sample beyond the next surface at t_max "passes" with
 probability P(t >= t_max) = T(t_max). With RGB extinction, one channel c is picked uniformly and
 t ~ sigma_c exp(-sigma_c t); the estimator uses the one-sample MIS (balance heuristic) density over
@@ -108,9 +109,10 @@ def scatter_probability_1(sigma, t_max):
 
 @njit(cache=True)
 def sample_distance_truncated_1(sigma, t_max, u):
-    """Collision distance conditioned to lie in [0, t_max) (forced scattering, used by
-    single-scattering estimators and photon tracing): t = -log1p(u expm1(-sigma t_max)) / sigma with
-    density sigma exp(-sigma t) / (1 - exp(-sigma t_max)). Returns (t, pdf). sigma = 0 -> uniform."""
+    """Collision distance conditioned to lie in [0, t_max) -- Gruson et al. 2018, Eq. 14 (camera edge
+    distance sampling), also forced scattering in single-scattering estimators and photon tracing:
+    t = -log1p(u expm1(-sigma t_max)) / sigma with density sigma exp(-sigma t) / (1 - exp(-sigma t_max)).
+    Returns (t, pdf). sigma = 0 -> uniform on [0, t_max)."""
     if sigma <= 0.0 or t_max <= 0.0:
         if t_max <= 0.0:
             return 0.0, 0.0

@@ -5,8 +5,10 @@ Sign convention -- Mitsuba 3's (src/phase/hg.cpp), checked against mitsuba 3.9 i
 ``wo`` is the outgoing direction, so undeviated forward scattering is wo = -wi. With
 cos_theta = dot(wi, wo),
 
-    p(wi, wo) = (1 - g^2) / (4 pi (1 + g^2 + 2 g cos_theta)^(3/2))           (Jarosz 2008, Eq. 6
-                                                                           with cos -> -cos)
+    p(wi, wo) = (1 - g^2) / (4 pi (1 + g^2 + 2 g cos_theta)^(3/2))
+
+(the textbook HG with the angle between propagation directions, cos -> -cos; it is the normalised
+phase function p of Jarosz et al. 2008, Eq. 2, and rho_p of Gruson et al. 2018, Eq. 3)
 
 so g > 0 scatters forward (peak at cos_theta = -1), g < 0 backward, g = 0 is isotropic (1 / 4 pi).
 Sampling is exact inversion, so the sample weight p / pdf is 1. Both routines are written without
