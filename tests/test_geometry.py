@@ -37,7 +37,7 @@ def test_triangle_hits_match_barycentric_solution():
         target = RNG.uniform(-0.5, 1.5, size=2)
         p = np.array([target[0], target[1], 0.0])
         d = _unit(p - o)
-        t, u, v = g.intersect_triangle(row, tuple(o), tuple(d), math.inf)
+        t, u, v = g.intersect_triangle(row[None], 0, tuple(o), tuple(d), math.inf)
         inside = p[0] >= 0 and p[1] >= 0 and p[0] + p[1] <= 1
         margin = min(p[0], p[1], 1 - p[0] - p[1])
         if abs(margin) < 1e-9:
@@ -58,7 +58,7 @@ def test_sphere_hits_from_outside_and_inside():
         # independent: solve |o + t d - c|^2 = r^2 with numpy's polynomial roots
         roots = np.roots([1.0, 2 * d @ (o - c), (o - c) @ (o - c) - r * r])
         roots = sorted(x.real for x in roots if abs(x.imag) < 1e-12 and x.real > 1e-9)
-        t = g.intersect_sphere(row, tuple(o), tuple(d), 1e-9, math.inf)
+        t = g.intersect_sphere(row[None], 0, tuple(o), tuple(d), 1e-9, math.inf)
         if roots:
             assert t == pytest.approx(roots[0], rel=1e-9, abs=1e-12)
         else:
@@ -72,7 +72,7 @@ def test_disk_accepts_inside_of_an_ellipse():
     for _ in range(1000):
         x, y = RNG.uniform(-2.5, 2.5), RNG.uniform(-0.8, 0.8)
         o, d = (x, y, 2.0), (0.0, 0.0, -1.0)
-        t, u, v = g.intersect_disk(rows[0], o, d, math.inf)
+        t, u, v = g.intersect_disk(rows, 0, o, d, math.inf)
         assert (t < math.inf) == ((x / 2) ** 2 + (y / 0.5) ** 2 <= 1.0)
 
 

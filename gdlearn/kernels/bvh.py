@@ -105,18 +105,18 @@ def _sah_split(lo, hi, cen):
 
 # --------------------------------------------------------------------------------------- traversal
 @njit(cache=True, inline="always")
-def _box_hit(node, o, inv, tmin, tmax):
-    """Slab test; returns the entry distance or inf."""
-    t0 = (node[0] - o[0]) * inv[0]
-    t1 = (node[3] - o[0]) * inv[0]
+def _box_hit(nodes, k, o, inv, tmin, tmax):
+    """Slab test of node k; returns the entry distance or inf."""
+    t0 = (nodes[k, 0] - o[0]) * inv[0]
+    t1 = (nodes[k, 3] - o[0]) * inv[0]
     if t0 > t1:
         t0, t1 = t1, t0
-    ty0 = (node[1] - o[1]) * inv[1]
-    ty1 = (node[4] - o[1]) * inv[1]
+    ty0 = (nodes[k, 1] - o[1]) * inv[1]
+    ty1 = (nodes[k, 4] - o[1]) * inv[1]
     if ty0 > ty1:
         ty0, ty1 = ty1, ty0
-    tz0 = (node[2] - o[2]) * inv[2]
-    tz1 = (node[5] - o[2]) * inv[2]
+    tz0 = (nodes[k, 2] - o[2]) * inv[2]
+    tz1 = (nodes[k, 5] - o[2]) * inv[2]
     if tz0 > tz1:
         tz0, tz1 = tz1, tz0
     lo = max(max(t0, ty0), max(tz0, tmin))
@@ -158,8 +158,8 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
             b = first + 1
             if d[node_info[node, 2]] < 0.0:   # visit the near child first
                 a, b = b, a
-            ta = _box_hit(nodes[a], o, inv, tmin, best_t)
-            tb = _box_hit(nodes[b], o, inv, tmin, best_t)
+            ta = _box_hit(nodes, a, o, inv, tmin, best_t)
+            tb = _box_hit(nodes, b, o, inv, tmin, best_t)
             if ta < math.inf:
                 if tb < math.inf:
                     stack[sp] = b
@@ -174,7 +174,7 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
         while sp > 0:
             sp -= 1
             node = stack[sp]
-            if _box_hit(nodes[node], o, inv, tmin, best_t) < math.inf:
+            if _box_hit(nodes, node, o, inv, tmin, best_t) < math.inf:
                 found = True
                 break
         if not found:
@@ -189,7 +189,7 @@ def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_nu
     """Index of some primitive hit in (tmin, tmax), or -1. With ``skip_null``, primitives whose
     material is a null BSDF (``materials[m, 0] == NULL``) are ignored (they only bound media)."""
     inv = _inv_dir(d)
-    if _box_hit(nodes[0], o, inv, tmin, tmax) == math.inf:
+    if _box_hit(nodes, 0, o, inv, tmin, tmax) == math.inf:
         return -1
     sp = 0
     node = 0
@@ -206,8 +206,8 @@ def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_nu
         else:
             a = first
             b = first + 1
-            ta = _box_hit(nodes[a], o, inv, tmin, tmax)
-            tb = _box_hit(nodes[b], o, inv, tmin, tmax)
+            ta = _box_hit(nodes, a, o, inv, tmin, tmax)
+            tb = _box_hit(nodes, b, o, inv, tmin, tmax)
             if ta < math.inf:
                 if tb < math.inf:
                     stack[sp] = b

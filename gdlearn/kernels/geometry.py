@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from .vec import cross, dot, normalize, sub
+from .vec import dot, normalize, sub
 
 # --- primitive types (column INFO_TYPE) ----------------------------------------------------------
 P_TRIANGLE = 0
@@ -52,45 +52,53 @@ def _v(row, k):
     return (row[k], row[k + 1], row[k + 2])
 
 
-@njit(cache=True)
-def intersect_triangle(row, o, d, tmax):
+# The intersection routines take the whole primitive table and an index instead of a row: slicing a
+# row creates an array view whose reference count two threads would update atomically on every
+# primitive test (the same counter for all rows), which costs more than the test itself.
+
+@njit(cache=True, inline="always")
+def intersect_triangle(P, i, o, d, tmax):
     """Moeller-Trumbore: (t, u, v) with t = inf on a miss. u, v are barycentrics of p1 and p2."""
-    e1 = _v(row, G_E1)
-    e2 = _v(row, G_E2)
-    pv = cross(d, e2)
-    det = dot(e1, pv)
+    e1x, e1y, e1z = P[i, 3], P[i, 4], P[i, 5]
+    e2x, e2y, e2z = P[i, 6], P[i, 7], P[i, 8]
+    pvx = d[1] * e2z - d[2] * e2y
+    pvy = d[2] * e2x - d[0] * e2z
+    pvz = d[0] * e2y - d[1] * e2x
+    det = e1x * pvx + e1y * pvy + e1z * pvz
     if det == 0.0:
         return math.inf, 0.0, 0.0
     inv = 1.0 / det
-    tv = (o[0] - row[0], o[1] - row[1], o[2] - row[2])
-    u = dot(tv, pv) * inv
+    tx, ty, tz = o[0] - P[i, 0], o[1] - P[i, 1], o[2] - P[i, 2]
+    u = (tx * pvx + ty * pvy + tz * pvz) * inv
     if u < 0.0 or u > 1.0:
         return math.inf, 0.0, 0.0
-    qv = cross(tv, e1)
-    v = dot(d, qv) * inv
+    qx = ty * e1z - tz * e1y
+    qy = tz * e1x - tx * e1z
+    qz = tx * e1y - ty * e1x
+    v = (d[0] * qx + d[1] * qy + d[2] * qz) * inv
     if v < 0.0 or u + v > 1.0:
         return math.inf, 0.0, 0.0
-    t = dot(e2, qv) * inv
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
     if t <= 0.0 or t >= tmax:
         return math.inf, 0.0, 0.0
     return t, u, v
 
 
-@njit(cache=True)
-def intersect_sphere(row, o, d, tmin, tmax):
+@njit(cache=True, inline="always")
+def intersect_sphere(P, i, o, d, tmin, tmax):
     """Nearest root in (tmin, tmax) of |o + t d - c| = r, for a unit d.
 
     Uses the cancellation-free discriminant r^2 - |f - (f.d) d|^2 (Haines et al., Ray Tracing Gems
     ch. 7) so grazing rays and far-away spheres keep their precision.
     """
-    f = (o[0] - row[0], o[1] - row[1], o[2] - row[2])
-    r = row[G_R]
-    b = -dot(f, d)
-    l = (f[0] + b * d[0], f[1] + b * d[1], f[2] + b * d[2])
-    disc = r * r - dot(l, l)
+    fx, fy, fz = o[0] - P[i, 0], o[1] - P[i, 1], o[2] - P[i, 2]
+    r = P[i, G_R]
+    b = -(fx * d[0] + fy * d[1] + fz * d[2])
+    lx, ly, lz = fx + b * d[0], fy + b * d[1], fz + b * d[2]
+    disc = r * r - (lx * lx + ly * ly + lz * lz)
     if disc < 0.0:
         return math.inf
-    c = dot(f, f) - r * r
+    c = fx * fx + fy * fy + fz * fz - r * r
     q = b + math.copysign(math.sqrt(disc), b)
     if q == 0.0:
         return math.inf
@@ -105,36 +113,37 @@ def intersect_sphere(row, o, d, tmin, tmax):
     return math.inf
 
 
-@njit(cache=True)
-def intersect_disk(row, o, d, tmax):
+@njit(cache=True, inline="always")
+def intersect_disk(P, i, o, d, tmax):
     """Plane of the disk, then local coordinates through the dual axes: inside if u^2 + v^2 <= 1."""
-    n = _v(row, G_NG)
-    dn = dot(d, n)
+    nx, ny, nz = P[i, G_NG], P[i, G_NG + 1], P[i, G_NG + 2]
+    dn = d[0] * nx + d[1] * ny + d[2] * nz
     if dn == 0.0:
         return math.inf, 0.0, 0.0
-    t = dot(sub(_v(row, G_C), o), n) / dn
+    t = ((P[i, 0] - o[0]) * nx + (P[i, 1] - o[1]) * ny + (P[i, 2] - o[2]) * nz) / dn
     if t <= 0.0 or t >= tmax:
         return math.inf, 0.0, 0.0
-    rel = (o[0] + t * d[0] - row[0], o[1] + t * d[1] - row[1], o[2] + t * d[2] - row[2])
-    u = dot(rel, _v(row, G_DA))
-    v = dot(rel, _v(row, G_DB))
+    rx = o[0] + t * d[0] - P[i, 0]
+    ry = o[1] + t * d[1] - P[i, 1]
+    rz = o[2] + t * d[2] - P[i, 2]
+    u = rx * P[i, G_DA] + ry * P[i, G_DA + 1] + rz * P[i, G_DA + 2]
+    v = rx * P[i, G_DB] + ry * P[i, G_DB + 1] + rz * P[i, G_DB + 2]
     if u * u + v * v > 1.0:
         return math.inf, 0.0, 0.0
     return t, u, v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
     """(t, u, v) of primitive ``i`` (t = inf: miss, or outside (tmin, tmax))."""
-    row = prims[i]
     if ptype == P_TRIANGLE:
-        t, u, v = intersect_triangle(row, o, d, tmax)
+        t, u, v = intersect_triangle(prims, i, o, d, tmax)
     elif ptype == P_SPHERE:
-        t = intersect_sphere(row, o, d, tmin, tmax)
+        t = intersect_sphere(prims, i, o, d, tmin, tmax)
         u = 0.0
         v = 0.0
     else:
-        t, u, v = intersect_disk(row, o, d, tmax)
+        t, u, v = intersect_disk(prims, i, o, d, tmax)
     if t <= tmin:
         return math.inf, 0.0, 0.0
     return t, u, v
