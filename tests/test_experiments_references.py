@@ -46,3 +46,19 @@ def test_load_reference_formats(tmp_path):
     with pytest.raises(ValueError, match="npz"):
         (tmp_path / "r.png").write_bytes(b"x")
         R.load_reference(tmp_path / "r.png")
+
+
+@pytest.mark.mitsuba
+def test_mitsuba_reference_has_noise_estimate(tmp_path, monkeypatch):
+    pytest.importorskip("mitsuba")
+    from pathlib import Path
+    from gdlearn.experiments.study import SceneFile
+
+    monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
+    scene = SceneFile(str(Path(__file__).parent.parent / "scenes" / "cornell-box.xml"), (("res", 8),))
+    ref = R.mitsuba_reference(scene, spp=64, seeds=(1, 2))
+    assert ref.image.shape == (8, 8, 3) and np.isfinite(ref.image).all()
+    assert ref.variance.shape == ref.image.shape and 0 < ref.floor < np.inf
+    again = R.mitsuba_reference(scene, spp=64, seeds=(1, 2))       # from the cache
+    assert again.path is not None
+    np.testing.assert_array_equal(again.image, ref.image)

@@ -98,3 +98,20 @@ def test_compare_command_on_the_toy(tmp_path, capsys):
     assert "toy-pt" in out and "toy-gpt" in out and "1.00x" in out
     rows = list(csv.DictReader(open(tmp_path / "c.csv")))
     assert len(rows) == 2 * 2 * 3 and (tmp_path / "c.png").stat().st_size > 10_000
+
+
+def test_scene_file_with_the_path_tracer():
+    """The real road: a scene file with -D res=8, the registry's 'pt', deterministic per seed."""
+    from pathlib import Path
+    from gdlearn.commands.compare import _defines
+
+    path = str(Path(__file__).parent.parent / "scenes" / "cornell-box.xml")
+    scene = S.SceneFile(path, _defines(["res=8"]))
+    a = S.equal_time(["pt"], scene, passes=3, seeds=[4], count=2, executor="serial")
+    b = S.equal_time(["pt"], scene, passes=3, seeds=[4], count=2, executor="serial")
+    img = a.images[("pt", "cornell-box", 4)]
+    assert img.shape == (8, 8, 3) and img.mean() > 0
+    np.testing.assert_array_equal(img, b.images[("pt", "cornell-box", 4)])
+    assert a.records[-1]["t_trace"] > 0 and a.records[-1]["compile_seconds"] >= 0
+    with pytest.raises(SystemExit, match="NAME=VALUE"):
+        _defines(["res"])
