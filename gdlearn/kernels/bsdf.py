@@ -15,6 +15,8 @@ Conventions (Mitsuba 3's ``BSDF`` interface, ``include/mitsuba/render/bsdf.h``):
 
 The per-type kernels live in bsdf_diffuse / bsdf_conductor / bsdf_dielectric / bsdf_plastic.
 """
+import math
+
 import numpy as np
 from numba import njit
 
@@ -63,11 +65,17 @@ def _sample_front(mat, wi, u_lobe, u1, u2):
 
 @njit(cache=True, inline="always")
 def bsdf_sample(mat, wi, u_lobe, u1, u2):
-    """Sample wo: ``(wo, weight, pdf, is_delta)``; u_lobe picks the lobe, (u1, u2) the direction."""
-    if _flips(mat, wi):
-        wo, w, pdf, delta = _sample_front(mat, (wi[0], wi[1], -wi[2]), u_lobe, u1, u2)
+    """Sample wo: ``(wo, weight, pdf, is_delta)``; u_lobe picks the lobe, (u1, u2) the direction.
+    A non-finite weight or pdf (never observed; a last guard so NaN cannot reach an image) is
+    returned as an invalid sample."""
+    flip = _flips(mat, wi)
+    wi_f = (wi[0], wi[1], -wi[2]) if flip else wi
+    wo, w, pdf, delta = _sample_front(mat, wi_f, u_lobe, u1, u2)
+    if not (pdf > 0.0 and pdf < math.inf and abs(w[0] + w[1] + w[2]) < math.inf):
+        return ZERO3, ZERO3, 0.0, delta
+    if flip:
         return (wo[0], wo[1], -wo[2]), w, pdf, delta
-    return _sample_front(mat, wi, u_lobe, u1, u2)
+    return wo, w, pdf, delta
 
 
 @njit(cache=True, inline="always")

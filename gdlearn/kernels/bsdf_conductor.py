@@ -46,7 +46,7 @@ def roughconductor_sample(mat, wi, u1, u2):
     m, pdf_m = mf_sample(dist, alpha, wi, u1, u2)
     wo = reflect_m(wi, m)
     dot_om = wo[0] * m[0] + wo[1] * m[1] + wo[2] * m[2]
-    if pdf_m <= 0.0 or wo[2] <= 0.0 or dot_om <= 0.0:
+    if not pdf_m > 0.0 or wo[2] <= 0.0 or dot_om <= 0.0:
         return ZERO3, ZERO3, 0.0, False
     g1 = mf_G1(dist, alpha, wo, m)
     pdf = pdf_m / (4.0 * dot_om)

@@ -58,7 +58,7 @@ def roughdielectric_sample(mat, wi, u_lobe, u1, u2):
     dist, alpha, eta = int(mat[MAT_DIST]), mat[MAT_ALPHA], mat[MAT_ETA]
     sgn = 1.0 if cos_i > 0.0 else -1.0
     m, pdf = mf_sample(dist, alpha, (wi[0] * sgn, wi[1] * sgn, wi[2] * sgn), u1, u2)
-    if pdf <= 0.0:
+    if not pdf > 0.0:
         return ZERO3, ZERO3, 0.0, False
     dot_im = _dot(wi, m)
     f, cos_t, eta_it, eta_ti = fresnel_dielectric(dot_im, eta)

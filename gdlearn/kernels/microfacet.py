@@ -220,6 +220,9 @@ def mf_sample(dist, alpha, wi, u1, u2):
     else:
         x, y = _visible_slopes_ggx(sz, u1, u2)
     x, y = (cos_phi * x - sin_phi * y) * a, (sin_phi * x + cos_phi * y) * a
-    inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+    r2 = x * x + y * y
+    if not r2 < 1e300:                   # a numerically horizontal microfacet (or nan): no sample
+        return (0.0, 0.0, 1.0), 0.0
+    inv = 1.0 / math.sqrt(r2 + 1.0)
     m = (-x * inv, -y * inv, inv)
     return m, mf_pdf(dist, alpha, wi, m)
