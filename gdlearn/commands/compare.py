@@ -78,6 +78,8 @@ def _reference(args, scene, is_toy):
         return refs.Reference(scene.truth(), np.zeros((scene.height, scene.width, 3)), None,
                               "analytic")
     if args.reference == "auto":
+        print(f"reference: {args.reference_spp} spp of {args.reference_method} (cached in "
+              f"{refs.cache_dir()}; the first time this takes a while)", file=sys.stderr)
         return refs.render_reference(scene, TOY_METHODS.get(args.reference_method,
                                                             args.reference_method),
                                      spp=args.reference_spp)

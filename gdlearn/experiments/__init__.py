@@ -11,8 +11,8 @@
 """
 from .metrics import loglog_slope, mse, relmse, relmse_floor, relmse_map, relmse_trimmed, time_to_reach
 from .progressive import Run, Snapshot, pass_schedule, run, time_schedule
-from .study import Method, Study, Task, equal_time, run_task
+from .study import Method, SceneFile, Study, Task, equal_time, run_task
 
 __all__ = ["relmse", "relmse_map", "relmse_trimmed", "relmse_floor", "mse", "loglog_slope",
            "time_to_reach", "run", "Run", "Snapshot", "pass_schedule", "time_schedule", "Method",
-           "Study", "Task", "equal_time", "run_task"]
+           "SceneFile", "Study", "Task", "equal_time", "run_task"]

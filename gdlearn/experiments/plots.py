@@ -180,7 +180,8 @@ def summary(study, scene=None, reference=None, baseline=None, metric: str = "rel
         convergence(study, scene, metric, ax=fig.add_subplot(grid[0, 0]))
         ratio_bars(study, baseline or methods[0], scene, fig.add_subplot(grid[0, 2]), metric)
     stage_bars(study, scene, fig.add_subplot(grid[0, 1]))
-    image_grid(images, reference, axes=[fig.add_subplot(grid[1, i]) for i in range(n)][: len(images) + has_ref])
+    image_grid(images, reference, axes=[fig.add_subplot(grid[1, i])
+                                        for i in range(len(images) + has_ref)])
     if has_ref:
         error_maps(images, reference, axes=[fig.add_subplot(grid[2, i]) for i in range(len(images))])
     return fig
