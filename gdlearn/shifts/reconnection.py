@@ -1,0 +1,79 @@
+"""Path reconnection (STAR, Hua et al. 2019, Sec. 3.3; Kettunen et al. 2015).
+
+The partial offset path (x'_0 ... x'_b) is joined to the base path's next vertex y = x_{b+1}; every
+vertex after y is shared. In the area measure the shifted vertex is y itself, so the Jacobian is
+
+    |dy'/dy| = 1                                         (STAR Sec. 3.3, area measure)
+
+In the solid-angle measure of the direction leaving x_b (what a path tracer samples), the same shift
+maps the base direction w = (y - x_b)/|y - x_b| to w' = (y - x'_b)/|y - x'_b| and
+
+    |dw'/dw| = (|cos theta'_y| / |x'_b - y|^2) / (|cos theta_y| / |x_b - y|^2)
+             = |cos theta'_y| / |cos theta_y| * |x_b - y|^2 / |x'_b - y|^2     (solid-angle form)
+
+with theta_y, theta'_y the angles at y between its normal and the base / offset segment
+(dA_y = d^2 / |cos theta_y| dw, taken on both paths). A medium vertex y (zero normal) has cosine 1.
+
+Reconnection is allowed only when x_b, x'_b and y are connectable (diffuse, glossy above the
+roughness threshold, or medium; :func:`connectable`): at a specular vertex the reconnected direction
+almost surely has zero BSDF. Visibility of the new segment x'_b -> y is the caller's ray query.
+"""
+import math
+
+from numba import njit
+
+from gdlearn.kernels import layout as L
+from gdlearn.kernels import vec
+from gdlearn.shifts.path import abs_cos
+
+
+@njit(cache=True, inline="always")
+def connectable(vclass):
+    """True for vertex classes a reconnection may touch (STAR Sec. 3.3: 'diffuse enough')."""
+    return vclass == L.V_DIFFUSE or vclass == L.V_GLOSSY or vclass == L.V_MEDIUM
+
+
+@njit(cache=True)
+def can_reconnect(class_b, class_b_offset, class_y):
+    """Reconnection x'_b -> y is admissible (and, being symmetric in base and offset, reversible)."""
+    return connectable(class_b) and connectable(class_b_offset) and connectable(class_y)
+
+
+@njit(cache=True)
+def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
+    """|dw'/dw| of the reconnection in the solid-angle measure at x_b (the solid-angle form in the module
+    docstring: Jacobian 1 in area, STAR Sec. 3.3, times dA = d^2/|cos| dw on both paths). Returns 0 when a segment is degenerate or grazes y (then the shift fails)."""
+    d = vec.sub(y, x_b)
+    do = vec.sub(y, x_b_offset)
+    d2 = vec.dot(d, d)
+    do2 = vec.dot(do, do)
+    if not (d2 > 0.0 and do2 > 0.0):
+        return 0.0
+    c = abs_cos(n_y, vec.scale(d, 1.0 / math.sqrt(d2)))
+    co = abs_cos(n_y, vec.scale(do, 1.0 / math.sqrt(do2)))
+    if not c > 0.0:
+        return 0.0
+    return (co / c) * (d2 / do2)
+
+
+@njit(cache=True)
+def reconnect(x_b, x_b_offset, y, n_y):
+    """Shift the segment x_b -> y to x'_b -> y.
+
+    Returns ``(w_offset, dist_offset, jacobian_area, jacobian_solid_angle, ok)``: the world direction
+    from x'_b to y and its length, the area-measure Jacobian (1) and its solid-angle form. ``ok`` is
+    False (Jacobians 0) when x'_b coincides with y or the offset segment grazes y (cos theta'_y = 0:
+    zero contribution and an irreversible shift, STAR Sec. 3.5).
+    """
+    do = vec.sub(y, x_b_offset)
+    do2 = vec.dot(do, do)
+    if not (do2 > 0.0) or not math.isfinite(do2):
+        return (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, False
+    dist = math.sqrt(do2)
+    w = vec.scale(do, 1.0 / dist)
+    if not abs_cos(n_y, w) > 0.0:
+        return w, dist, 0.0, 0.0, False
+    j_sa = reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y)
+    if not (j_sa > 0.0 and math.isfinite(j_sa)):
+        return w, dist, 0.0, 0.0, False
+    return w, dist, 1.0, j_sa, True
