@@ -50,29 +50,28 @@ INV_FOUR_PI = 0.25 / math.pi
 def prim_point(prims, prim_info, prim, u1, u2):
     """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
     ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
-    row = prims[prim]
     pt = prim_info[prim, INFO_TYPE]
     if pt == P_TRIANGLE:
         su = math.sqrt(1.0 - u1)
         b1 = 1.0 - su
         b2 = u2 * su
-        q = (row[0] + b1 * row[G_E1] + b2 * row[G_E2], row[1] + b1 * row[G_E1 + 1] + b2 * row[G_E2 + 1],
-             row[2] + b1 * row[G_E1 + 2] + b2 * row[G_E2 + 2])
-        if row[G_HASN] != 0.0:
+        q = (prims[prim, 0] + b1 * prims[prim, G_E1] + b2 * prims[prim, G_E2], prims[prim, 1] + b1 * prims[prim, G_E1 + 1] + b2 * prims[prim, G_E2 + 1],
+             prims[prim, 2] + b1 * prims[prim, G_E1 + 2] + b2 * prims[prim, G_E2 + 2])
+        if prims[prim, G_HASN] != 0.0:
             b0 = 1.0 - b1 - b2
-            n = normalize((b0 * row[12] + b1 * row[15] + b2 * row[18], b0 * row[13] + b1 * row[16] + b2 * row[19],
-                           b0 * row[14] + b1 * row[17] + b2 * row[20]))
+            n = normalize((b0 * prims[prim, 12] + b1 * prims[prim, 15] + b2 * prims[prim, 18], b0 * prims[prim, 13] + b1 * prims[prim, 16] + b2 * prims[prim, 19],
+                           b0 * prims[prim, 14] + b1 * prims[prim, 17] + b2 * prims[prim, 20]))
         else:
-            n = (row[G_NG], row[G_NG + 1], row[G_NG + 2])
+            n = (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
         return q, n
     if pt == P_SPHERE:
         z = 1.0 - 2.0 * u1
         r = math.sqrt(max(0.0, 1.0 - z * z))
         phi = 2.0 * math.pi * u2
         w = (r * math.cos(phi), r * math.sin(phi), z)
-        rad = row[G_R]
-        s = row[G_SIGN]
-        return (row[0] + rad * w[0], row[1] + rad * w[1], row[2] + rad * w[2]), (s * w[0], s * w[1], s * w[2])
+        rad = prims[prim, G_R]
+        s = prims[prim, G_SIGN]
+        return (prims[prim, 0] + rad * w[0], prims[prim, 1] + rad * w[1], prims[prim, 2] + rad * w[2]), (s * w[0], s * w[1], s * w[2])
     # disk: Shirley-Chiu concentric map of [0,1)^2 onto the unit disk, then the disk's affine axes
     a = 2.0 * u1 - 1.0
     b = 2.0 * u2 - 1.0
@@ -85,9 +84,9 @@ def prim_point(prims, prim_info, prim, u1, u2):
     else:
         x = b * math.sin(0.25 * math.pi * a / b)
         y = b * math.cos(0.25 * math.pi * a / b)
-    q = (row[G_C] + x * row[G_A] + y * row[G_B], row[G_C + 1] + x * row[G_A + 1] + y * row[G_B + 1],
-         row[G_C + 2] + x * row[G_A + 2] + y * row[G_B + 2])
-    return q, (row[G_NG], row[G_NG + 1], row[G_NG + 2])
+    q = (prims[prim, G_C] + x * prims[prim, G_A] + y * prims[prim, G_B], prims[prim, G_C + 1] + x * prims[prim, G_A + 1] + y * prims[prim, G_B + 1],
+         prims[prim, G_C + 2] + x * prims[prim, G_A + 2] + y * prims[prim, G_B + 2])
+    return q, (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
 
 
 @njit(cache=True, inline="always")
@@ -105,20 +104,20 @@ def _pick_prim(em_cdf, first, count, u):
 
 
 @njit(cache=True)
-def spot_falloff(row, d_world):
+def spot_falloff(emitters, em, d_world):
     """Mitsuba's ``falloff_curve`` for the world direction ``d_world`` leaving the spot."""
-    lx = row[EM_INV] * d_world[0] + row[EM_INV + 1] * d_world[1] + row[EM_INV + 2] * d_world[2]
-    ly = row[EM_INV + 3] * d_world[0] + row[EM_INV + 4] * d_world[1] + row[EM_INV + 5] * d_world[2]
-    lz = row[EM_INV + 6] * d_world[0] + row[EM_INV + 7] * d_world[1] + row[EM_INV + 8] * d_world[2]
+    lx = emitters[em, EM_INV] * d_world[0] + emitters[em, EM_INV + 1] * d_world[1] + emitters[em, EM_INV + 2] * d_world[2]
+    ly = emitters[em, EM_INV + 3] * d_world[0] + emitters[em, EM_INV + 4] * d_world[1] + emitters[em, EM_INV + 5] * d_world[2]
+    lz = emitters[em, EM_INV + 6] * d_world[0] + emitters[em, EM_INV + 7] * d_world[1] + emitters[em, EM_INV + 8] * d_world[2]
     ln = math.sqrt(lx * lx + ly * ly + lz * lz)
     if ln == 0.0:
         return 0.0
     c = lz / ln
-    if c <= row[EM_COS_CUTOFF]:
+    if c <= emitters[em, EM_COS_CUTOFF]:
         return 0.0
-    if c >= row[EM_COS_BEAM]:
+    if c >= emitters[em, EM_COS_BEAM]:
         return 1.0
-    return (row[EM_CUTOFF] - math.acos(min(1.0, c))) * row[EM_INV_TRANS]
+    return (emitters[em, EM_CUTOFF] - math.acos(min(1.0, c))) * emitters[em, EM_INV_TRANS]
 
 
 @njit(cache=True)
@@ -140,12 +139,11 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
     x = u_sel * n_em
     em = min(int(x), n_em - 1)
     u_rest = min(x - em, 0.9999999999999999)   # the leftover of u_sel picks the primitive
-    row = emitters[em]
-    et = int(row[EM_TYPE])
+    et = int(emitters[em, EM_TYPE])
     sel = 1.0 / n_em
-    rgb = (row[EM_RGB], row[EM_RGB + 1], row[EM_RGB + 2])
+    rgb = (emitters[em, EM_RGB], emitters[em, EM_RGB + 1], emitters[em, EM_RGB + 2])
     if et == E_AREA:
-        prim = _pick_prim(em_cdf, int(row[EM_FIRST]), int(row[EM_COUNT]), u_rest)
+        prim = _pick_prim(em_cdf, int(emitters[em, EM_FIRST]), int(emitters[em, EM_COUNT]), u_rest)
         q, nq = prim_point(prims, prim_info, em_prims[prim], u1, u2)
         dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
         dist2 = dot(dv, dv)
@@ -156,11 +154,11 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
         cos_q = -dot(d, nq)
         if cos_q <= 0.0:        # one-sided: the back of an area emitter is black
             return -1, q, nq, d, dist, zero, 0.0, 0.0, False
-        pdf_area = sel / row[EM_AREA]
+        pdf_area = sel / emitters[em, EM_AREA]
         pdf = pdf_area * dist2 / cos_q
         return em, q, nq, d, dist, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, pdf_area, False
     if et == E_POINT or et == E_SPOT:
-        q = (row[EM_P], row[EM_P + 1], row[EM_P + 2])
+        q = (emitters[em, EM_P], emitters[em, EM_P + 1], emitters[em, EM_P + 2])
         dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
         dist2 = dot(dv, dv)
         if dist2 == 0.0:
@@ -169,13 +167,13 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
         d = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
         f = 1.0 / (dist2 * sel)
         if et == E_SPOT:
-            f *= spot_falloff(row, (-d[0], -d[1], -d[2]))
+            f *= spot_falloff(emitters, em, (-d[0], -d[1], -d[2]))
             if f <= 0.0:
                 return -1, q, zero, d, dist, zero, 0.0, 0.0, True
         return em, q, zero, d, dist, (rgb[0] * f, rgb[1] * f, rgb[2] * f), sel, 0.0, True
-    r2 = 2.0 * row[EM_BS_R]
+    r2 = 2.0 * emitters[em, EM_BS_R]
     if et == E_DIRECTIONAL:
-        d = (-row[EM_D], -row[EM_D + 1], -row[EM_D + 2])
+        d = (-emitters[em, EM_D], -emitters[em, EM_D + 1], -emitters[em, EM_D + 2])
         q = (p[0] + r2 * d[0], p[1] + r2 * d[1], p[2] + r2 * d[2])
         return em, q, zero, d, r2, (rgb[0] / sel, rgb[1] / sel, rgb[2] / sel), sel, 0.0, True
     # constant: uniform direction on the sphere
@@ -213,10 +211,9 @@ def emitter_pdf(emitters, em, p, q, nq):
 def eval_emitter(emitters, em, nq, d):
     """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
     shading normal ``nq`` (zero from behind); constant emitters ignore nq."""
-    row = emitters[em]
-    et = int(row[EM_TYPE])
+    et = int(emitters[em, EM_TYPE])
     if et == E_AREA and dot(d, nq) >= 0.0:
         return (0.0, 0.0, 0.0)
     if et != E_AREA and et != E_CONSTANT:
         return (0.0, 0.0, 0.0)
-    return (row[EM_RGB], row[EM_RGB + 1], row[EM_RGB + 2])
+    return (emitters[em, EM_RGB], emitters[em, EM_RGB + 1], emitters[em, EM_RGB + 2])
