@@ -9,7 +9,6 @@ Jupyter Book does, so the tests execute exactly what the book build executes.
 from __future__ import annotations
 
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -83,8 +82,3 @@ def execute_chapter(path: Path, quick: bool = True):
         os.environ.clear()
         os.environ.update(env_before)
     return nb, time.perf_counter() - t0
-
-
-@pytest.fixture
-def python_exe() -> str:
-    return sys.executable
