@@ -33,6 +33,22 @@ needs_mitsuba = pytest.mark.skipif(
                              "(the README's test command installs it)")
 
 CASES = {c.name: c for c in store.reference_cases()}
+#: Cases whose image mean cannot be made precise enough for REL_BOUND at test cost; the block z-tests
+#: and the REL_BOUND itself still apply, only the "is the bound >= 3 standard errors" check is waived.
+INFINITE_VARIANCE = {
+    "test-single-scatter": "a point light inside the medium: single scattering near it has infinite "
+                           "variance (~1/d^2 NEE), so the image mean's standard error does not shrink "
+                           "like 1/sqrt(spp); measured: gdlearn's relative se 1.4 % at 4864 spp",
+}
+#: Known, explained mismatches (strict xfail: the test turns red again once the cause is fixed, so
+#: the marker must then be removed). Found by this cross-check; see the reason for the evidence.
+KNOWN_MISMATCH = {
+    "spot-medium": "scene issue: the smoke cube's bottom face (y = -0.2 - 0.8 = -1) is coplanar with "
+                   "the floor (y = -1); gdlearn and Mitsuba break the tie differently, so the blocks "
+                   "at the cube's foot (rows 20-27, cols 8-23) are 0.6-0.8x Mitsuba (z down to -40), "
+                   "image mean -3 %. With the cube raised by 0.01 (translate y=-0.19) gdlearn matches "
+                   "Mitsuba (0/192 blocks beyond the bound, mean z^2 0.85).",
+}
 #: Family-wise false-alarm probability of one image comparison (Bonferroni inside compare()).
 ALPHA = 1e-3
 #: The image mean must agree to 3 % per channel: below the 5 % light change the harness must catch,
@@ -260,7 +276,9 @@ def _gdlearn_render(name: str) -> ImageStats:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(CASES))
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_MISMATCH[n]))
+    if n in KNOWN_MISMATCH else n for n in sorted(CASES)])
 def test_gdlearn_pt_matches_mitsuba(name):
     """gdlearn's PT converges to Mitsuba 3's image on every shipped scene (and the direct cases)."""
     if name in KNOWN_REFERENCE_BIAS:
@@ -268,7 +286,8 @@ def test_gdlearn_pt_matches_mitsuba(name):
     ref, test = _reference(name), _gdlearn_render(name)
     c = compare(test, ref, alpha=ALPHA, rel_bound=REL_BOUND)
     assert c.ok, f"{name}: {c.summary()}"
-    _check_rel_bound_has_power(test, ref)
+    if name not in INFINITE_VARIANCE:
+        _check_rel_bound_has_power(test, ref)
 
 
 @pytest.mark.slow
