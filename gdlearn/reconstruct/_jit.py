@@ -14,8 +14,8 @@ import types
 
 from numba import njit
 
-#: Arrays with at least this many values use the parallel twin (~4 ms of work at 1 ns per value).
-PARALLEL_MIN_SIZE = 1 << 16
+#: Arrays with at least this many values (~300 x 300 x 3) use the parallel twin.
+PARALLEL_MIN_SIZE = 1 << 18
 
 
 def kernel(fn):

@@ -32,21 +32,24 @@ def laplacian_eigenvalues(h: int, w: int) -> np.ndarray:
     return ky[:, None] + kx[None, :]
 
 
-def solve_shifted_laplacian(b: np.ndarray, c0: float, c1: float, mean=None, out_dtype=np.float64,
-                            eig: np.ndarray | None = None) -> np.ndarray:
+def solve_shifted_laplacian(b: np.ndarray, c0: float, c1: float, mean=None,
+                            eig: np.ndarray | None = None, dtype=np.float64) -> np.ndarray:
     """Solve ``(c0 I + c1 L) x = b`` exactly for each channel of an H x W x C array ``b``.
 
     ``c0 >= 0``, ``c1 > 0``. ``mean`` (per channel, shape (C,)) fixes the mean of ``x`` -- the
     constant mode; if None it is ``sum(b) / (c0 N)`` when c0 > 0 and 0 (the pseudo-inverse) when
     c0 == 0. ``b`` is not modified. ``eig`` may pass precomputed :func:`laplacian_eigenvalues`.
+    ``dtype=np.float32`` halves the transform time; only a preconditioner, whose own error is far
+    above float32 round-off, should ask for it. The result is always float64.
     """
     h, w, c = b.shape
     if eig is None:
         eig = laplacian_eigenvalues(h, w)
+    b = np.asarray(b, dtype=dtype)
     # threads pay off only on large images (thread start-up dominates below ~64k values)
     workers = -1 if b.size >= 1 << 16 else 1
     bh = sfft.dctn(b, type=2, axes=(0, 1), norm="ortho", workers=workers)
-    denom = c0 + c1 * eig
+    denom = (c0 + c1 * eig).astype(dtype)
     denom[0, 0] = 1.0                 # the constant mode is set below, never divided
     bh /= denom[:, :, None]
     n = h * w
@@ -57,4 +60,4 @@ def solve_shifted_laplacian(b: np.ndarray, c0: float, c1: float, mean=None, out_
     else:
         bh[0, 0, :] = 0.0
     x = sfft.idctn(bh, type=2, axes=(0, 1), norm="ortho", workers=workers, overwrite_x=True)
-    return np.asarray(x, dtype=out_dtype)
+    return np.asarray(x, dtype=np.float64)
