@@ -30,7 +30,7 @@ from .base import PassResult, ProgressiveIntegrator
 UNBOUNDED = 1 << 30
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
     every pixel into ``out`` (H x W x 3); ``bad[y]`` counts the non-finite samples dropped in row y."""
@@ -59,7 +59,7 @@ def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
         bad[y] = nbad
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True)
 def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
     h, w = out.shape[0], out.shape[1]

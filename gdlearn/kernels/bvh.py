@@ -104,7 +104,7 @@ def _sah_split(lo, hi, cen):
 
 
 # --------------------------------------------------------------------------------------- traversal
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _box_hit(nodes, k, o, inv, tmin, tmax):
     """Slab test of node k; returns the entry distance or inf."""
     t0 = (nodes[k, 0] - o[0]) * inv[0]
@@ -126,7 +126,7 @@ def _box_hit(nodes, k, o, inv, tmin, tmax):
     return math.inf
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _inv_dir(d):
     # 1/0 = +-inf is what the slab test wants; numba raises on float division by zero, so spell it out
     ix = 1.0 / d[0] if d[0] != 0.0 else math.copysign(math.inf, d[0])
@@ -135,7 +135,7 @@ def _inv_dir(d):
     return (ix, iy, iz)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """(t, prim, u, v) of the nearest hit in (tmin, tmax); prim = -1 on a miss."""
     inv = _inv_dir(d)
@@ -184,7 +184,7 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     return best_t, best_p, best_u, best_v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """Index of some primitive hit in (tmin, tmax), or -1. With ``skip_null``, primitives whose
     material is a null BSDF (``materials[m, 0] == NULL``) are ignored (they only bound media)."""

@@ -57,7 +57,7 @@ def camera_row(to_world: np.ndarray, fov: float, fov_axis: str, width: int, heig
     return cam
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def camera_ray(cam, film_x, film_y):
     """(origin, unit direction, tmax) of the primary ray through raster point (film_x, film_y)."""
     lx = (1.0 - 2.0 * film_x / cam[CAM_W]) * cam[CAM_TX]
@@ -71,7 +71,7 @@ def camera_ray(cam, film_x, film_y):
     return o, d, cam[CAM_FAR] / inv - near_t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def camera_raster(cam, p):
     """Inverse of :func:`camera_ray`: (visible, film_x, film_y) of world point ``p``.
 
@@ -94,7 +94,7 @@ def camera_raster(cam, p):
     return ok, fx, fy
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def camera_importance(cam, d):
     """Mitsuba's perspective ``We`` along world direction d leaving the camera (per unit film
     area on the image plane at distance 1, normalised to integrate to 1 over the film):

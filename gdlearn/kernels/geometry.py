@@ -47,16 +47,21 @@ G_A, G_B, G_DA, G_DB = 3, 6, 12, 15
 PRIM_WIDTH = 22
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _v(row, k):
     return (row[k], row[k + 1], row[k + 2])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _v3(P, i, k):
+    return (P[i, k], P[i, k + 1], P[i, k + 2])
 
 
 # The intersection routines take the whole primitive table and an index instead of a row: slicing a
 # row creates an array view whose reference count two threads would update atomically on every
 # primitive test (the same counter for all rows), which costs more than the test itself.
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def intersect_triangle(P, i, o, d, tmax):
     """Moeller-Trumbore: (t, u, v) with t = inf on a miss. u, v are barycentrics of p1 and p2."""
     e1x, e1y, e1z = P[i, 3], P[i, 4], P[i, 5]
@@ -84,7 +89,7 @@ def intersect_triangle(P, i, o, d, tmax):
     return t, u, v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def intersect_sphere(P, i, o, d, tmin, tmax):
     """Nearest root in (tmin, tmax) of |o + t d - c| = r, for a unit d.
 
@@ -113,7 +118,7 @@ def intersect_sphere(P, i, o, d, tmin, tmax):
     return math.inf
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def intersect_disk(P, i, o, d, tmax):
     """Plane of the disk, then local coordinates through the dual axes: inside if u^2 + v^2 <= 1."""
     nx, ny, nz = P[i, G_NG], P[i, G_NG + 1], P[i, G_NG + 2]
@@ -133,7 +138,7 @@ def intersect_disk(P, i, o, d, tmax):
     return t, u, v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
     """(t, u, v) of primitive ``i`` (t = inf: miss, or outside (tmin, tmax))."""
     if ptype == P_TRIANGLE:
@@ -149,7 +154,7 @@ def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
     return t, u, v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def surface(prims, prim_info, prim, o, d, t, u, v):
     """The surface interaction of a hit: (p, ng, ns).
 
@@ -157,36 +162,35 @@ def surface(prims, prim_info, prim, o, d, t, u, v):
     interpolated vertex normals on smooth meshes, else ng). The hit point is recomputed on the
     primitive (not o + t d) for triangles and disks, which keeps it on the surface to rounding.
     """
-    row = prims[prim]
     ptype = prim_info[prim, INFO_TYPE]
     if ptype == P_TRIANGLE:
         w = 1.0 - u - v
-        p = (row[0] + u * row[3] + v * row[6], row[1] + u * row[4] + v * row[7],
-             row[2] + u * row[5] + v * row[8])
-        ng = _v(row, G_NG)
-        if row[G_HASN] != 0.0:
-            ns = normalize((w * row[12] + u * row[15] + v * row[18], w * row[13] + u * row[16] + v * row[19],
-                            w * row[14] + u * row[17] + v * row[20]))
+        p = (prims[prim, 0] + u * prims[prim, 3] + v * prims[prim, 6], prims[prim, 1] + u * prims[prim, 4] + v * prims[prim, 7],
+             prims[prim, 2] + u * prims[prim, 5] + v * prims[prim, 8])
+        ng = _v3(prims, prim, G_NG)
+        if prims[prim, G_HASN] != 0.0:
+            ns = normalize((w * prims[prim, 12] + u * prims[prim, 15] + v * prims[prim, 18], w * prims[prim, 13] + u * prims[prim, 16] + v * prims[prim, 19],
+                            w * prims[prim, 14] + u * prims[prim, 17] + v * prims[prim, 20]))
         else:
             ns = ng
     elif ptype == P_SPHERE:
         p0 = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
-        ng = normalize(sub(p0, _v(row, G_C)))
-        r = row[G_R]
+        ng = normalize(sub(p0, _v3(prims, prim, G_C)))
+        r = prims[prim, G_R]
         # project back onto the sphere: o + t d drifts by ~t * eps
-        p = (row[0] + r * ng[0], row[1] + r * ng[1], row[2] + r * ng[2])
-        s = row[G_SIGN]
+        p = (prims[prim, 0] + r * ng[0], prims[prim, 1] + r * ng[1], prims[prim, 2] + r * ng[2])
+        s = prims[prim, G_SIGN]
         ng = (s * ng[0], s * ng[1], s * ng[2])
         ns = ng
     else:
-        p = (row[0] + u * row[3] + v * row[6], row[1] + u * row[4] + v * row[7],
-             row[2] + u * row[5] + v * row[8])
-        ng = _v(row, G_NG)
+        p = (prims[prim, 0] + u * prims[prim, 3] + v * prims[prim, 6], prims[prim, 1] + u * prims[prim, 4] + v * prims[prim, 7],
+             prims[prim, 2] + u * prims[prim, 5] + v * prims[prim, 8])
+        ng = _v3(prims, prim, G_NG)
         ns = ng
     return p, ng, ns
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def offset_origin(p, ng, d):
     """Spawn point for a ray leaving ``p`` along ``d``: pushed off the surface to d's side of ng.
 

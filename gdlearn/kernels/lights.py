@@ -46,7 +46,7 @@ EM_WIDTH = 28
 INV_FOUR_PI = 0.25 / math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def prim_point(prims, prim_info, prim, u1, u2):
     """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
     ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
@@ -89,7 +89,7 @@ def prim_point(prims, prim_info, prim, u1, u2):
     return q, (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pick_prim(em_cdf, first, count, u):
     """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
     lo = first
@@ -103,7 +103,7 @@ def _pick_prim(em_cdf, first, count, u):
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def spot_falloff(emitters, em, d_world):
     """Mitsuba's ``falloff_curve`` for the world direction ``d_world`` leaving the spot."""
     lx = emitters[em, EM_INV] * d_world[0] + emitters[em, EM_INV + 1] * d_world[1] + emitters[em, EM_INV + 2] * d_world[2]
@@ -120,7 +120,7 @@ def spot_falloff(emitters, em, d_world):
     return (emitters[em, EM_CUTOFF] - math.acos(min(1.0, c))) * emitters[em, EM_INV_TRANS]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
     """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
 
@@ -186,7 +186,7 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
     return em, q, zero, d, r2, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, 0.0, False
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def emitter_pdf(emitters, em, p, q, nq):
     """Solid-angle pdf at ``p`` with which :func:`sample_emitter` would produce the emitter point
     ``q`` (normal ``nq``) of emitter ``em`` (area or constant; delta emitters: 0). For constant
@@ -207,7 +207,7 @@ def emitter_pdf(emitters, em, p, q, nq):
     return dist2 / (cos_q * emitters[em, EM_AREA] * n_em)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def eval_emitter(emitters, em, nq, d):
     """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
     shading normal ``nq`` (zero from behind); constant emitters ignore nq."""

@@ -26,13 +26,13 @@ from .vec import dot
 SHADOW_EPS = 1e-7
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def new_stack():
     """A traversal stack for one thread."""
     return np.empty(STACK_SIZE, dtype=np.int32)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def intersect(sa, o, d, tmin, tmax, stack):
     """Closest hit of the ray o + t d, t in (tmin, tmax).
 
@@ -48,7 +48,7 @@ def intersect(sa, o, d, tmin, tmax, stack):
     return True, t, prim, p, ng, ns, dot(d, ng) < 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shadow_ray(p, ng, q):
     """(origin, unit direction, tmax) of the segment from surface point p (geometric normal ng;
     zeros for a point in a medium) to q. The origin is pushed off p's surface and the direction and
@@ -66,7 +66,7 @@ def shadow_ray(p, ng, q):
     return o, (d[0] / dist, d[1] / dist, d[2] / dist), dist * (1.0 - SHADOW_EPS)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def occluded(sa, p, ng, q, stack):
     """True if anything blocks the segment from surface point p (geometric normal ng; pass zeros
     for a point in a medium) to q. Null-BSDF surfaces block too (in media they are crossed instead,
@@ -78,19 +78,19 @@ def occluded(sa, p, ng, q, stack):
                    False, sa.materials) >= 0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def sample_light(sa, p, u_sel, u1, u2):
     """Next-event sample from p (no visibility test): see :func:`lights.sample_emitter`."""
     return sample_emitter(sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel, u1, u2)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def light_pdf(sa, em, p, q, nq):
     """Solid-angle pdf at p of sampling emitter point q (normal nq) with :func:`sample_light`."""
     return emitter_pdf(sa.emitters, em, p, q, nq)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def light_eval(sa, prim, ns, d):
     """(emitter row or -1, radiance) a ray of direction d sees at a hit of primitive ``prim``."""
     em = sa.prim_info[prim, INFO_EMITTER]
@@ -99,7 +99,7 @@ def light_eval(sa, prim, ns, d):
     return em, eval_emitter(sa.emitters, em, ns, d)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def material_of(sa, prim):
     """The material row of a primitive."""
     return sa.materials[sa.prim_info[prim, INFO_MAT]]

@@ -38,13 +38,13 @@ D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_C
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def dim(bounce, k):
     """The RNG dimension of quantity k at bounce b (see the module docstring)."""
     return 2 + bounce * DIMS_PER_BOUNCE + k
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
     """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput)."""
     s, t, n = ns_frame
@@ -64,13 +64,13 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _wanted(mask, state):
     """Does the effects mask ask for the class of a path ending at a light after ``state``?"""
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb.
 

@@ -48,7 +48,7 @@ from .vec import coordinate_system, dot, max3, to_local, to_world
 MAX_SEGMENTS = 4096
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def roulette(beta, eta, depth, rr_depth, u):
     """Mitsuba's Russian roulette from rr_depth on: survive with q = min(max(beta) eta^2, 0.95) and
     divide by q. Returns (alive, beta)."""
@@ -63,7 +63,7 @@ def roulette(beta, eta, depth, rr_depth, u):
     return True, (beta[0] / q, beta[1] / q, beta[2] / q)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def next_medium(prim_info, prim, medium, d, ng):
     """The medium a ray of direction d is in after crossing/leaving the surface of ``prim``."""
     if prim_info[prim, INFO_MED_TRANS] == 0:
@@ -73,7 +73,7 @@ def next_medium(prim_info, prim, medium, d, ng):
     return prim_info[prim, INFO_MED_EXT]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shadow_transmittance(sa, p, ng, q, medium, stack):
     """Transmittance from p (surface normal ng, or zeros in a medium) to q, crossing null interfaces
     and the media between them; 0 if any non-null surface blocks the segment."""
@@ -106,7 +106,7 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
     return tr
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack):
     """Emitter sample from p with transmittance: (em, d, weight, pdf, is_delta) with weight =
     Le T / pdf (Mitsuba volpath's ``sample_emitter``); em = -1 when it carries nothing.
@@ -126,7 +126,7 @@ def nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack):
     return em, dl, (w_em[0] * tr[0], w_em[1] * tr[1], w_em[2] * tr[2]), pdf_em, delta
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``volpath``; see the module docstring)."""
     L = (0.0, 0.0, 0.0)
