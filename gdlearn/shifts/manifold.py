@@ -1,0 +1,371 @@
+"""Manifold exploration shift (Jakob & Marschner 2012; STAR, Hua et al. 2019, Sec. 3.4; GPM 2017
+Eq. 7-8): a Newton walk on half-vector constraints moves a specular chain x_1 .. x_k (k = 1..3)
+so that it joins two fixed endpoints x_0 (the shifted connectable vertex x'_b) and x_{k+1} (the
+base path's next connectable vertex x_c).
+
+Constraints. At chain vertex j the generalised half vector h_j of (w_i = x_{j-1} - x_j, w_o =
+x_{j+1} - x_j), expressed in the vertex's local frame (s, t, n), must keep the base path's tangential
+components: c_j = (h_j . s, h_j . t) - o_j = 0, with o_j = 0 for a perfect mirror / dielectric
+(Jakob & Marschner 2012, Sec. 4; the half vector as in halfvector.py, Walter et al. 2007). The 2k
+unknowns are the chain vertices moved on their surfaces in 2-D charts.
+
+Walk. Start from the base chain (the offset endpoint moved by ~a pixel: the base is an excellent
+initial guess); each iteration takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a
+surface, flips a reflection / refraction side or does not reduce |C| is rejected and halved
+(step halving), at most ``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after
+``max_iter`` iterations (default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and
+reports failure otherwise. An unreachable target (the solution is off a finite surface, needs total
+internal reflection, or is not found in the budget) is a failure flag, never an exception.
+
+Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sampled from x_b); the
+offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|
+(base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
+theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
+G(x_b .. x_c) / G(x_b, x_1). A and B are central differences of the constraint function (step
+1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10 from round-off),
+which replaces Jakob's analytic second-order surface derivatives.
+
+Geometry of the chain: each chain vertex lies on an analytic surface given as a row of ``shapes``
+(``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
+unbounded plane) or a sphere (centre, radius; normal outward, local frame
+``vec.coordinate_system(n)``). A triangle is a plane quad row bounded by its caller's check.
+Visibility along the moved segments is the caller's ray query.
+"""
+import math
+
+import numpy as np
+from numba import njit
+
+from gdlearn.kernels import vec
+from gdlearn.shifts.halfvector import half_vector
+
+# --- shape rows ---------------------------------------------------------------------------------
+SHAPE_PLANE = 0
+SHAPE_SPHERE = 1
+SH_TYPE = 0
+SH_P = 1        # 3: plane point / sphere centre
+SH_N = 4        # 3: plane normal (outside, for eta = int/ext)
+SH_U = 7        # 3: plane tangent axis 1 (unit)
+SH_V = 10       # 3: plane tangent axis 2 (unit)
+SH_EXT = 13     # 2: plane half extents along U, V (inf: unbounded)
+SH_R = 15       # sphere radius
+SH_WIDTH = 16
+
+MAX_ITER = 5
+MAX_HALVINGS = 10
+TOL = 1e-12
+FD_REL_STEP = 1e-6
+
+
+def plane_row(point, normal, u_axis, extent=(math.inf, math.inf)):
+    """A plane (quad) row; u_axis is projected to the tangent plane; extent = half sizes along U, V."""
+    n = np.asarray(normal, float)
+    n = n / np.linalg.norm(n)
+    u = np.asarray(u_axis, float)
+    u = u - np.dot(u, n) * n
+    if not np.linalg.norm(u) > 1e-12:
+        raise ValueError("plane_row: u_axis is parallel to the normal; fix: pass a tangent direction")
+    u /= np.linalg.norm(u)
+    row = np.zeros(SH_WIDTH)
+    row[SH_TYPE] = SHAPE_PLANE
+    row[SH_P:SH_P + 3], row[SH_N:SH_N + 3] = point, n
+    row[SH_U:SH_U + 3], row[SH_V:SH_V + 3] = u, np.cross(n, u)
+    row[SH_EXT:SH_EXT + 2] = extent
+    return row
+
+
+def sphere_row(center, radius):
+    if not radius > 0:
+        raise ValueError(f"sphere_row: radius must be > 0, got {radius!r}; fix: pass a positive radius")
+    row = np.zeros(SH_WIDTH)
+    row[SH_TYPE] = SHAPE_SPHERE
+    row[SH_P:SH_P + 3] = center
+    row[SH_R] = radius
+    return row
+
+
+@njit(cache=True, inline="always")
+def _v3(a, i, c):
+    return (a[i, c], a[i, c + 1], a[i, c + 2])
+
+
+@njit(cache=True)
+def shape_frame(shapes, j, x):
+    """(s, t, n) local frame of chain vertex j at x."""
+    if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
+        return _v3(shapes, j, SH_U), _v3(shapes, j, SH_V), _v3(shapes, j, SH_N)
+    n = vec.normalize(vec.sub(x, _v3(shapes, j, SH_P)))
+    s, t = vec.coordinate_system(n)
+    return s, t, n
+
+
+@njit(cache=True)
+def shape_chart(shapes, j, x, u, v):
+    """Move x on its surface by (u, v) in the tangent frame (derivative at 0 is orthonormal)."""
+    s, t, n = shape_frame(shapes, j, x)
+    y = (x[0] + u * s[0] + v * t[0], x[1] + u * s[1] + v * t[1], x[2] + u * s[2] + v * t[2])
+    if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
+        return y
+    c = _v3(shapes, j, SH_P)
+    return vec.add(c, vec.scale(vec.normalize(vec.sub(y, c)), shapes[j, SH_R]))
+
+
+@njit(cache=True)
+def shape_contains(shapes, j, x):
+    if int(shapes[j, SH_TYPE]) != SHAPE_PLANE:
+        return True
+    d = vec.sub(x, _v3(shapes, j, SH_P))
+    return (abs(vec.dot(d, _v3(shapes, j, SH_U))) <= shapes[j, SH_EXT]
+            and abs(vec.dot(d, _v3(shapes, j, SH_V))) <= shapes[j, SH_EXT + 1])
+
+
+@njit(cache=True)
+def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
+    """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (wrong side,
+    degenerate half vector, vertex off its surface)."""
+    for j in range(k):
+        xj = _v3(X, j, 0)
+        if not shape_contains(shapes, j, xj):
+            return False
+        prev = x0 if j == 0 else _v3(X, j - 1, 0)
+        nxt = xe if j == k - 1 else _v3(X, j + 1, 0)
+        s, t, n = shape_frame(shapes, j, xj)
+        wi = vec.normalize(vec.sub(prev, xj))
+        wo = vec.normalize(vec.sub(nxt, xj))
+        wi_l = vec.to_local(wi, s, t, n)
+        wo_l = vec.to_local(wo, s, t, n)
+        side = wi_l[2] * wo_l[2]
+        if (refract[j] and not side < 0.0) or (not refract[j] and not side > 0.0):
+            return False
+        h, _, ok = half_vector(wi_l, wo_l, etas[j] if refract[j] else 1.0)
+        if not ok or not (vec.dot(wi_l, h) * wi_l[2] > 0.0 and vec.dot(wo_l, h) * wo_l[2] > 0.0):
+            return False
+        out[2 * j] = h[0] - targets[j, 0]
+        out[2 * j + 1] = h[1] - targets[j, 1]
+    return True
+
+
+@njit(cache=True)
+def _max_abs(a, m):
+    r = 0.0
+    for i in range(m):
+        r = max(r, abs(a[i]))
+    return r
+
+
+@njit(cache=True)
+def solve_linear(A, B, m, nrhs):
+    """Solve A Z = B in place (Gaussian elimination, partial pivoting); Z overwrites B. False if
+    A is singular to working precision (numba's np.linalg.solve would raise instead)."""
+    scale = 0.0
+    for i in range(m):
+        for c in range(m):
+            scale = max(scale, abs(A[i, c]))
+    if not scale > 0.0 or not math.isfinite(scale):
+        return False
+    for c in range(m):
+        p = c
+        for r in range(c + 1, m):
+            if abs(A[r, c]) > abs(A[p, c]):
+                p = r
+        if not abs(A[p, c]) > 1e-13 * scale:
+            return False
+        for q in range(m):
+            A[c, q], A[p, q] = A[p, q], A[c, q]
+        for q in range(nrhs):
+            B[c, q], B[p, q] = B[p, q], B[c, q]
+        for r in range(c + 1, m):
+            f = A[r, c] / A[c, c]
+            for q in range(c, m):
+                A[r, q] -= f * A[c, q]
+            for q in range(nrhs):
+                B[r, q] -= f * B[c, q]
+    for c in range(m - 1, -1, -1):
+        for q in range(nrhs):
+            s = B[c, q]
+            for r in range(c + 1, m):
+                s -= A[c, r] * B[r, q]
+            B[c, q] = s / A[c, c]
+    return True
+
+
+@njit(cache=True)
+def chain_length_scale(x0, X, xe, k):
+    total = vec.norm(vec.sub(_v3(X, 0, 0), x0)) + vec.norm(vec.sub(xe, _v3(X, k - 1, 0)))
+    for j in range(k - 1):
+        total += vec.norm(vec.sub(_v3(X, j + 1, 0), _v3(X, j, 0)))
+    return total / (k + 1)
+
+
+@njit(cache=True)
+def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+    """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) and B = dC/dx_e (2k x 2, tangent
+    plane of x_e with normal ne), by central differences. False if a probe is invalid."""
+    m = 2 * k
+    h = FD_REL_STEP * chain_length_scale(x0, X, xe, k)
+    Xp = X.copy()
+    cp = np.empty(m)
+    cm = np.empty(m)
+    for j in range(k + 1):
+        for a in range(2):
+            for sgn in range(2):
+                d = h if sgn == 0 else -h
+                u, v = (d, 0.0) if a == 0 else (0.0, d)
+                xe_p = xe
+                if j < k:
+                    Xp[:] = X
+                    p = shape_chart(shapes, j, _v3(X, j, 0), u, v)
+                    Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
+                else:
+                    Xp[:] = X
+                    s, t = vec.coordinate_system(ne)
+                    xe_p = vec.add(xe, vec.add(vec.scale(s, u), vec.scale(t, v)))
+                ok = constraints(x0, Xp, xe_p, shapes, etas, refract, targets, k,
+                                 cp if sgn == 0 else cm)
+                if not ok:
+                    return False
+            for r in range(m):
+                g = (cp[r] - cm[r]) / (2.0 * h)
+                if j < k:
+                    A[r, 2 * j + a] = g
+                else:
+                    B[r, a] = g
+    return True
+
+
+@njit(cache=True)
+def _moved(X, dX, lam, shapes, k, Xn):
+    for j in range(k):
+        p = shape_chart(shapes, j, _v3(X, j, 0), lam * dX[2 * j, 0], lam * dX[2 * j + 1, 0])
+        Xn[j, 0], Xn[j, 1], Xn[j, 2] = p[0], p[1], p[2]
+
+
+@njit(cache=True)
+def _norm2(a, m):
+    s = 0.0
+    for i in range(m):
+        s += a[i] * a[i]
+    return math.sqrt(s)
+
+
+@njit(cache=True)
+def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
+    """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
+    chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
+    m = 2 * k
+    C = np.empty(m)
+    Cn = np.empty(m)
+    A = np.empty((m, m))
+    B = np.empty((m, 2))
+    dX = np.empty((m, 1))
+    Xn = X.copy()
+    if not constraints(x0, X, xe, shapes, etas, refract, targets, k, C):
+        return False, 0, math.inf
+    r = _max_abs(C, m)
+    for it in range(max_iter):
+        if r < tol:
+            return True, it, r
+        if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+            return False, it, r
+        for i in range(m):
+            dX[i, 0] = -C[i]
+        if not solve_linear(A, dX, m, 1):
+            return False, it, r
+        lam = 1.0
+        accepted = False
+        n0 = _norm2(C, m)
+        for _ in range(max_halvings + 1):
+            _moved(X, dX, lam, shapes, k, Xn)
+            if constraints(x0, Xn, xe, shapes, etas, refract, targets, k, Cn) and _norm2(Cn, m) < n0:
+                accepted = True
+                break
+            lam *= 0.5                      # step halving on rejection
+        if not accepted:
+            return False, it + 1, r
+        X[:] = Xn
+        C[:] = Cn
+        r = _max_abs(C, m)
+    return r < tol, max_iter, r
+
+
+@njit(cache=True)
+def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
+    """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8,
+    G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints."""
+    m = 2 * k
+    A = np.empty((m, m))
+    B = np.empty((m, 2))
+    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+        return 0.0, False
+    if not solve_linear(A, B, m, 2):
+        return 0.0, False
+    d = abs(B[0, 0] * B[1, 1] - B[0, 1] * B[1, 0])     # the sign of -A^-1 B does not matter
+    if not (d > 0.0 and math.isfinite(d)):
+        return 0.0, False
+    return d, True
+
+
+@njit(cache=True)
+def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
+    """Fill targets (k x 2) with the base chain's tangential half-vector components (0 at a perfect
+    specular vertex up to round-off); False if the base chain itself is invalid."""
+    zeros = np.zeros((k, 2))
+    c = np.empty(2 * k)
+    if not constraints(x0, X, xe, shapes, etas, refract, zeros, k, c):
+        return False
+    for j in range(k):
+        targets[j, 0] = c[2 * j]
+        targets[j, 1] = c[2 * j + 1]
+    return True
+
+
+@njit(cache=True)
+def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, max_iter):
+    """True if the walk from the offset chain back to x_b returns to the base chain: near a caustic
+    several chains join the same endpoints and the shift would not be invertible there."""
+    Xb = Xo.copy()
+    ok, _, _ = manifold_walk(x_b, x_c, n_c, Xb, shapes, etas, refract, targets, k, max_iter,
+                             MAX_HALVINGS, TOL)
+    if not ok:
+        return False
+    tol = 1e-7 * chain_length_scale(x_b, X_base, x_c, k)
+    for j in range(k):
+        for c in range(3):
+            if not abs(Xb[j, c] - X_base[j, c]) <= tol:
+                return False
+    return True
+
+
+@njit(cache=True)
+def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, X_out, max_iter,
+                   check_reversible):
+    """Shift the specular chain X_base (k x 3) between x_b and x_c to join x'_b and x_c.
+
+    Returns ``(jacobian, ok, iterations)``: J = |dx'_1/dx_1| in the area measure (GPM Eq. 7-8, module
+    docstring) and the offset chain in X_out. Failure (walk did not converge in ``max_iter``,
+    unreachable target, singular constraints) returns J = 0 and ok = False. With
+    ``check_reversible`` the backward walk must also lead back to the base chain (else ok = False:
+    an irreversible shift, STAR Sec. 3.5); it doubles the cost.
+    """
+    if k < 1 or k > X_base.shape[0]:
+        return 0.0, False, 0
+    targets = np.empty((k, 2))
+    if not half_vector_targets(x_b, X_base, x_c, shapes, etas, refract, k, targets):
+        return 0.0, False, 0
+    X_out[:k] = X_base[:k]
+    Xo = X_out[:k]
+    ok, iters, _ = manifold_walk(x_b_offset, x_c, n_c, Xo, shapes, etas, refract, targets, k,
+                                 max_iter, MAX_HALVINGS, TOL)
+    if not ok:
+        return 0.0, False, iters
+    det_b, ok_b = chain_endpoint_det(x_b, X_base, x_c, n_c, shapes, etas, refract, targets, k)
+    det_o, ok_o = chain_endpoint_det(x_b_offset, Xo, x_c, n_c, shapes, etas, refract, targets, k)
+    if not (ok_b and ok_o):
+        return 0.0, False, iters
+    j = det_o / det_b
+    if not (j > 0.0 and math.isfinite(j)):
+        return 0.0, False, iters
+    if check_reversible and not _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract,
+                                            targets, k, max_iter):
+        return 0.0, False, iters
+    return j, True, iters

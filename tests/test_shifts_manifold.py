@@ -1,0 +1,240 @@
+"""Manifold exploration shift (Jakob & Marschner 2012; GPM Eq. 7-8): specular chains of length 1-3
+(mirror, refraction, a glass sphere, sphere + mirror), checked three independent ways:
+
+* the offset chain is a real specular path: tracing forward from x'_b through x'_1 with the laws of
+  reflection and refraction (written here in numpy, not the code under test) lands on x_c;
+* the Jacobian |dx'_1/dx_1| equals the finite-difference Jacobian of the whole shift map (perturb the
+  base vertex x_1 on its surface, re-trace the base chain to a new x_c, re-run the walk);
+* walking back from the offset recovers the base chain (reversibility) and the inverse Jacobian.
+
+Unreachable targets (a finite mirror too small, total internal reflection, too far for 5 iterations)
+fail with a flag.
+"""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.dirname(__file__))
+from test_shifts_geometry import Plane, Sphere, fd_jacobian, unit  # noqa: E402
+
+from gdlearn.shifts import manifold as M  # noqa: E402
+
+T = tuple
+GLASS = 1.5
+
+
+def _bend(w, n, eta, refract):
+    """Direction after scattering the travelling direction w at a surface with outward normal n."""
+    if not refract:
+        return w - 2 * np.dot(w, n) * n
+    c = -np.dot(w, n)                         # cosine on the arrival side (> 0: from outside)
+    eta_ti = 1 / eta if c > 0 else eta
+    nn = n if c > 0 else -n
+    c = abs(c)
+    s2 = eta_ti ** 2 * (1 - c * c)
+    if s2 >= 1:
+        return None
+    return unit(eta_ti * w + (eta_ti * c - np.sqrt(1 - s2)) * nn)
+
+
+class Scene:
+    """A chain of analytic surfaces (test geometry) mirrored by gdlearn shape rows."""
+
+    def __init__(self, surfaces, rows, refract, end):
+        self.surfaces, self.rows, self.end = surfaces, np.array(rows), end
+        self.refract = np.array(refract, bool)
+        self.etas = np.full(len(surfaces), GLASS)
+        self.k = len(surfaces)
+
+    def trace_chain(self, x_b, x1):
+        """Base chain from x_b through x1 (on surface 0): list of vertices and the end point."""
+        pts = [np.asarray(x1, float)]
+        w = unit(pts[0] - x_b)
+        for j, s in enumerate(self.surfaces):
+            w = _bend(w, s.normal(pts[-1]), GLASS, self.refract[j])
+            if w is None:
+                return None
+            nxt = self.surfaces[j + 1] if j + 1 < self.k else self.end
+            t = nxt.intersect(pts[-1], w)
+            if np.isnan(t):
+                return None
+            pts.append(pts[-1] + t * w)
+        return np.array(pts[:-1]), pts[-1]
+
+    def shift(self, x_b, chain, x_c, x_bo, max_iter=M.MAX_ITER, check=False):
+        out = np.zeros((3, 3))
+        j, ok, it = M.manifold_shift(T(x_b), T(x_bo), np.ascontiguousarray(chain), T(x_c),
+                                     T(self.end.normal(x_c)), self.rows, self.etas, self.refract,
+                                     self.k, out, max_iter, check)
+        return j, ok, it, out[:self.k].copy()
+
+
+def mirror_scene(extent=np.inf):
+    return Scene([Plane([0, 0, 0], [0, 0, 1])],
+                 [M.plane_row([0, 0, 0], [0, 0, 1], [1, 0, 0], (extent, extent))],
+                 [False], Plane([0, 0, 1.5], [0.1, 0, -1]))
+
+
+def refraction_scene():
+    return Scene([Plane([0, 0, 0], [0, 0, 1])], [M.plane_row([0, 0, 0], [0, 0, 1], [1, 0, 0])],
+                 [True], Plane([0, 0, -1], [0.2, 0, 1]))
+
+
+def sphere_scene():
+    s = Sphere([0, 0, 0], 1.0)
+    # the floor sits before the ball lens's focus (back focal distance 0.5 R for eta = 1.5): past the
+    # focus x_1 -> x_c nears a caustic, the inverse is ill-conditioned and Newton needs many steps
+    return Scene([s, s], [M.sphere_row([0, 0, 0], 1.0)] * 2, [True, True], Plane([0, 0, -1.3], [0, 0, 1]))
+
+
+def sphere_mirror_scene():
+    s = Sphere([0, 0, 0], 1.0)
+    n = unit([0.4, 0, 1])
+    return Scene([s, s, Plane([0, 0, -1.25], n)],
+                 [M.sphere_row([0, 0, 0], 1.0), M.sphere_row([0, 0, 0], 1.0), M.plane_row([0, 0, -1.25], n, [1, 0, 0])],
+                 [True, True, False], Plane([4, 0, 0], [-1, 0, 0]))
+
+
+SCENES = {"mirror": mirror_scene, "refraction": refraction_scene, "sphere2": sphere_scene,
+          "sphere+mirror3": sphere_mirror_scene}
+
+
+def _configs(name, rng, n):
+    """Random base paths (x_b, x_1) that trace to the end surface, and an offset x'_b nearby."""
+    sc = SCENES[name]()
+    out = []
+    while len(out) < n:
+        x_b = np.array([rng.normal() * 0.3, rng.normal() * 0.3, 3.0])
+        if name.startswith("sphere"):
+            x1 = unit([rng.normal() * 0.25, rng.normal() * 0.25, 1.0])
+        else:
+            x1 = np.array([rng.normal() * 0.4, rng.normal() * 0.4, 0.0])
+        if sc.trace_chain(x_b, x1) is None:
+            continue
+        x_bo = x_b + rng.normal(size=3) * 0.02          # a pixel-sized move of the offset vertex
+        out.append((x_b, x1, x_bo))
+    return sc, out
+
+
+def _forward_hits(sc, x_bo, chain_o, x_c):
+    """Independent check: the offset chain obeys the specular laws and ends on x_c."""
+    res = sc.trace_chain(x_bo, chain_o[0])
+    return res is not None and np.allclose(res[0], chain_o, atol=1e-8) and np.allclose(res[1], x_c, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_walk_connects_and_jacobian_matches_finite_differences(name):
+    rng = np.random.default_rng(list(SCENES).index(name) + 100)
+    sc, cfgs = _configs(name, rng, 25)
+    checked = 0
+    for x_b, x1, x_bo in cfgs:
+        chain, x_c = sc.trace_chain(x_b, x1)
+        j, ok, it, chain_o = sc.shift(x_b, chain, x_c, x_bo)
+        assert ok, (name, x_b, x1, x_bo)
+        assert it <= M.MAX_ITER
+        assert _forward_hits(sc, x_bo, chain_o, x_c)
+        s0 = sc.surfaces[0]
+
+        def shift(u, v):
+            y1 = s0.chart(x1, u, v)
+            base = sc.trace_chain(x_b, y1)
+            if base is None:
+                return None
+            jj, good, _, ch = sc.shift(x_b, base[0], base[1], x_bo)
+            return (ch[0], s0.normal(ch[0])) if good else None
+        # h = 1e-4: the walk's positions are exact to ~1e-14 (converged to |c| < 1e-12, quadratic),
+        # so round-off in the FD is ~1e-10; fourth-order truncation ~h^4 = 1e-16. The Jacobian
+        # inside manifold_shift comes from central differences of the constraints (~1e-9). 1e-6.
+        fd = fd_jacobian(shift, h=1e-4)
+        assert fd is not None
+        assert j == pytest.approx(fd, rel=1e-6), (name, x_b, x1, x_bo)
+        checked += 1
+    assert checked == len(cfgs)
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_reversible(name):
+    """Where the shift claims reversibility (check_reversible=True and ok), walking back recovers the
+    base chain and the inverse Jacobian. Near the ball lens's caustic (marginal rays focus early)
+    two chains can join the same endpoints: then the check must report the shift as failed."""
+    rng = np.random.default_rng(3)
+    sc, cfgs = _configs(name, rng, 10)
+    n_ok = 0
+    for x_b, x1, x_bo in cfgs:
+        chain, x_c = sc.trace_chain(x_b, x1)
+        j, ok, _, chain_o = sc.shift(x_b, chain, x_c, x_bo, check=True)
+        if not ok:
+            continue
+        n_ok += 1
+        jb, okb, _, back = sc.shift(x_bo, chain_o, x_c, x_b)
+        assert okb
+        assert np.allclose(back, chain, atol=1e-9)
+        assert j * jb == pytest.approx(1.0, rel=1e-7)
+    assert n_ok >= 9
+
+
+def test_irreversible_chain_is_flagged():
+    """A configuration found by search (seed 3, tenth path on the glass sphere): the forward walk
+    converges, the backward walk converges to a different chain; the check must say 'failed'."""
+    sc, cfgs = _configs("sphere2", np.random.default_rng(3), 10)
+    x_b, x1, x_bo = cfgs[9]
+    chain, x_c = sc.trace_chain(x_b, x1)
+    assert sc.shift(x_b, chain, x_c, x_bo)[1]
+    _, ok_back_any, _, back = sc.shift(x_bo, sc.shift(x_b, chain, x_c, x_bo)[3], x_c, x_b, max_iter=30)
+    assert not ok_back_any or not np.allclose(back, chain, atol=1e-6)
+    assert not sc.shift(x_b, chain, x_c, x_bo, check=True)[1]
+
+
+def test_jacobian_is_not_trivially_one():
+    """Power: on the glass sphere the Jacobians differ from 1 by far more than the tolerance."""
+    sc, cfgs = _configs("sphere2", np.random.default_rng(4), 10)
+    js = [sc.shift(x_b, *sc.trace_chain(x_b, x1), x_bo)[0] for x_b, x1, x_bo in cfgs]
+    assert np.mean(np.abs(np.array(js) - 1) > 1e-4) > 0.5
+
+
+def test_unreachable_targets_fail_cleanly():
+    # a small finite mirror: the offset's reflection point would be off the quad
+    sc = mirror_scene(extent=0.05)
+    x_b = np.array([0.0, 0.0, 3.0])
+    x1 = np.array([0.04, 0.0, 0.0])
+    chain, x_c = sc.trace_chain(x_b, x1)
+    j, ok, it, _ = sc.shift(x_b, chain, x_c, x_b + [0.5, 0, 0])
+    assert not ok and j == 0.0
+    # the offset vertex moved behind the mirror: no reflection can join it to x_c
+    sc = mirror_scene()
+    chain, x_c = sc.trace_chain(x_b, x1)
+    j, ok, it, _ = sc.shift(x_b, chain, x_c, np.array([0.0, 0.0, -0.5]))
+    assert not ok and j == 0.0
+    # a glass slab (two refractions) and an offset vertex 50 units away at grazing incidence: the
+    # solution is far outside what 5 damped Newton steps from the base chain can reach
+    top = Plane([0, 0, 0], [0, 0, 1])
+    bottom = Plane([0, 0, -0.5], [0, 0, -1])
+    sc = Scene([top, bottom], [M.plane_row([0, 0, 0], [0, 0, 1], [1, 0, 0]),
+                               M.plane_row([0, 0, -0.5], [0, 0, -1], [1, 0, 0])],
+               [True, True], Plane([0, 0, -0.6], [0, 0, 1]))
+    x_b = np.array([0.0, 0.0, 1.0])
+    chain, x_c = sc.trace_chain(x_b, np.array([0.2, 0.0, 0.0]))
+    j, ok, it, _ = sc.shift(x_b, chain, x_c, np.array([-50.0, 0.0, 0.01]))
+    assert not ok and j == 0.0
+    # a far move that 5 iterations cannot reach, but more iterations can: the cap is honoured
+    sc, cfgs = _configs("sphere2", np.random.default_rng(8), 1)
+    x_b, x1, _ = cfgs[0]
+    chain, x_c = sc.trace_chain(x_b, x1)
+    far = x_b + [0.8, -0.6, 0.0]
+    j1, ok1, it1, _ = sc.shift(x_b, chain, x_c, far, max_iter=1)
+    assert not ok1 and it1 <= 1
+    # degenerate inputs: zero chain length or an endpoint on the chain: flags, no exceptions
+    j, ok, it, _ = sc.shift(x_b, chain, x_c, chain[0])
+    assert not ok and np.isfinite(j)
+
+
+def test_singular_system_is_reported():
+    A = np.zeros((2, 2))
+    B = np.ones((2, 1))
+    assert not M.solve_linear(A, B, 2, 1)
+    A = np.array([[2.0, 1.0], [1.0, 3.0]])
+    B = np.array([[3.0], [5.0]])
+    assert M.solve_linear(A.copy(), B, 2, 1)
+    assert np.allclose(B[:, 0], np.linalg.solve(A, [3.0, 5.0]))
