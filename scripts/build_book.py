@@ -8,7 +8,9 @@ own code and the scene files, and on quick mode; a cache hit across a change of 
 show stale figures. So this script fingerprints them -- pyproject.toml, the Python version, every
 installed distribution's name and version, the contents of gdlearn/ and scenes/, and
 ``GDLEARN_QUICK`` -- and clears ``_build/.jupyter_cache`` when the fingerprint differs from the one
-stored beside it. (A text-only edit of a chapter still hits the cache.)
+stored beside it, together with Sphinx's doctrees (which hold every page's outputs as well; without
+them gone an unchanged page would keep its old figures). A text-only edit of a chapter still hits
+the cache.
 
 Usage (the Makefile's ``make book`` calls the first form)::
 
@@ -34,6 +36,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 CACHE = ROOT / "_build" / ".jupyter_cache"
 STAMP = ROOT / "_build" / ".jupyter_cache.fingerprint"
+#: Sphinx's pickled environment holds every page's executed outputs too: an unchanged chapter would
+#: keep its old figures from there even with the execution cache gone. Wiped together with CACHE.
+DOCTREES = ROOT / "_build" / ".doctrees"
 #: Trees whose content the chapters' outputs depend on (besides the chapters themselves).
 SOURCE_TREES = ("gdlearn", "scenes")
 SKIP_SUFFIXES = (".pyc", ".nbi", ".nbc")          # byte code and numba's own caches
@@ -66,6 +71,7 @@ def refresh_cache(quick: bool, fresh: bool) -> str:
     old = STAMP.read_text().strip() if STAMP.is_file() else None
     if fresh or old != new:
         shutil.rmtree(CACHE, ignore_errors=True)
+        shutil.rmtree(DOCTREES, ignore_errors=True)
         STAMP.parent.mkdir(parents=True, exist_ok=True)
         STAMP.write_text(new + "\n")
         return "cleared (" + ("--fresh" if fresh else "no fingerprint yet" if old is None else

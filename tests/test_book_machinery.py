@@ -119,6 +119,7 @@ def test_cache_is_wiped_when_the_fingerprint_changes(tmp_path, monkeypatch):
     bb = _build_book_module()
     monkeypatch.setattr(bb, "CACHE", tmp_path / ".jupyter_cache")
     monkeypatch.setattr(bb, "STAMP", tmp_path / "fingerprint")
+    monkeypatch.setattr(bb, "DOCTREES", tmp_path / ".doctrees")
     assert bb.fingerprint(quick=True) != bb.fingerprint(quick=False)
     bb.CACHE.mkdir()
     assert bb.refresh_cache(quick=False, fresh=False).startswith("cleared")     # no stamp yet
@@ -126,8 +127,9 @@ def test_cache_is_wiped_when_the_fingerprint_changes(tmp_path, monkeypatch):
     (bb.CACHE / "kept").write_text("x")
     assert bb.refresh_cache(quick=False, fresh=False).startswith("kept")
     assert (bb.CACHE / "kept").exists()
+    bb.DOCTREES.mkdir()
     assert bb.refresh_cache(quick=True, fresh=False).startswith("cleared")      # mode switched
-    assert not bb.CACHE.exists()
+    assert not bb.CACHE.exists() and not bb.DOCTREES.exists()     # no page may keep old outputs
     bb.STAMP.write_text("an old environment\n")
     bb.CACHE.mkdir()
     assert bb.refresh_cache(quick=True, fresh=False).startswith("cleared")
