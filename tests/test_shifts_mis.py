@@ -105,6 +105,11 @@ def test_policy_choices():
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, D, S, path, 1, 3) == P.SHIFT_FAIL
     # glossy and medium vertices reconnect like diffuse ones
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, G, M, _vc(D, G, M), 1, 3) == P.SHIFT_RECONNECT
+    # last vertex (next-event estimation): reconnect from a connectable vertex only
+    assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, D, D, _vc(D, D), 1, 2) == P.SHIFT_RECONNECT
+    assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, S, S, _vc(D, S), 1, 2) == P.SHIFT_HALFVECTOR
+    assert P.choose_shift(P.POLICY_REPLAY_RECONNECTION, S, S, _vc(D, S), 1, 2) == P.SHIFT_REPLAY
+    assert P.choose_shift(P.POLICY_REPLAY, D, D, _vc(D, D), 1, 2) == P.SHIFT_REPLAY
     assert P.policy_code("halfvector+reconnection") == P.POLICY_HALFVECTOR_RECONNECTION
     with pytest.raises(ValueError, match="fix: use one of"):
         P.policy_code("halfvector")

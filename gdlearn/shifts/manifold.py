@@ -29,7 +29,9 @@ Geometry of the chain: each chain vertex lies on an analytic surface given as a 
 (``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
 unbounded plane) or a sphere (centre, radius; normal outward, local frame
 ``vec.coordinate_system(n)``). A triangle is a plane quad row bounded by its caller's check.
-Visibility along the moved segments is the caller's ray query.
+Visibility along the moved segments is the caller's ray query. The end vertex x_c must lie on a
+surface (a medium end vertex would need a 3-D chart); glossy chains moved as if specular (GPM Eq.
+9-10, with the half-vector reparameterisation of the Jacobian) are not implemented.
 """
 import math
 
@@ -347,8 +349,8 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
     ``check_reversible`` the backward walk must also lead back to the base chain (else ok = False:
     an irreversible shift, STAR Sec. 3.5); it doubles the cost.
     """
-    if k < 1 or k > X_base.shape[0]:
-        return 0.0, False, 0
+    if k < 1 or k > X_base.shape[0] or vec.dot(n_c, n_c) == 0.0:
+        return 0.0, False, 0            # x_c must be a surface vertex (its 2-D chart is the measure)
     targets = np.empty((k, 2))
     if not half_vector_targets(x_b, X_base, x_c, shapes, etas, refract, k, targets):
         return 0.0, False, 0

@@ -76,7 +76,8 @@ def specular_chain_end(vclass, start, n):
 
 @njit(cache=True)
 def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
-    """The action for the segment leaving vertex b (module docstring).
+    """The action for the segment leaving vertex b >= 1 (module docstring); the primary segment
+    (sensor -> x_1) is shifted by the pixel offset itself, which the integrator does.
 
     ``vclass_base`` holds the base path's vertex classes (n valid vertices); ``class_b_offset`` is
     the class of the already shifted offset vertex x'_b.
@@ -84,10 +85,14 @@ def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
     cb = connectable(class_b)
     if cb != connectable(class_b_offset):
         return SHIFT_FAIL
-    if b + 1 >= n:
-        return SHIFT_RECONNECT if policy != POLICY_REPLAY else SHIFT_REPLAY
     if policy == POLICY_REPLAY:
         return SHIFT_REPLAY
+    if b + 1 >= n:
+        # no next base vertex: the segment to a light sample (next-event estimation) is reconnected
+        # from a connectable vertex; from a specular one it can only follow the copied direction
+        if cb:
+            return SHIFT_RECONNECT
+        return SHIFT_REPLAY if policy == POLICY_REPLAY_RECONNECTION else SHIFT_HALFVECTOR
     nxt = vclass_base[b + 1]
     if cb and connectable(nxt):
         return SHIFT_RECONNECT
