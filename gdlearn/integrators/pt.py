@@ -131,8 +131,11 @@ class PathTracer(ProgressiveIntegrator):
         if self.threads is not None:
             numba.set_num_threads(int(self.threads))
         try:
-            self.kernel(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, self.mask, self.threshold,
-                        out, bad)
+            # dynamic chunks of a few rows: rows differ in cost (light, boxes, escaping rays), and a
+            # static half/half split would leave one core idle at the end of every pass
+            with numba.parallel_chunksize(max(1, out.shape[0] // 32)):
+                self.kernel(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, self.mask, self.threshold,
+                            out, bad)
         finally:
             numba.set_num_threads(old)
         return int(bad.sum())

@@ -25,6 +25,7 @@ from numba import njit
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    sampled_lobe_class, vertex_class)
 from .bvh import closest_hit
+from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
 from .pathclass import pc_class, pc_init, pc_push, pc_reachable
@@ -147,3 +148,16 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         if not bmax > 0.0:
             break
     return (L0, L1, L2)
+
+
+@njit(cache=True, error_model="numpy")
+def radiance(sa, film_x, film_y, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """The per-path estimator at raster position (film_x, film_y) with the random numbers of
+    (seed, key, sample): the camera ray through the film point, then :func:`radiance_path`.
+
+    ``key`` is passed separately from the film position on purpose: random-sequence replay
+    (Hua et al. 2019, Sec. 2.3) evaluates the base pixel's key at a neighbouring pixel's position.
+    The caller draws the position inside the pixel with dims 0 and 1 of the same key.
+    """
+    o, d, tmax = camera_ray(sa.camera, film_x, film_y)
+    return radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack)

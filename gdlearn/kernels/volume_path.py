@@ -30,6 +30,7 @@ from numba import njit
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    sampled_lobe_class, vertex_class)
 from .bvh import closest_hit
+from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
 from .layout import MAT_TYPE, NULL, V_MEDIUM
 from .lights import emitter_pdf, eval_emitter, sample_emitter
@@ -226,3 +227,11 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
         if not alive:
             break
     return L
+
+
+@njit(cache=True, error_model="numpy")
+def radiance(sa, film_x, film_y, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """:func:`radiance_volpath` for the camera ray through raster point (film_x, film_y); the key is
+    separate from the position for random-sequence replay (see ``surface_path.radiance``)."""
+    o, d, tmax = camera_ray(sa.camera, film_x, film_y)
+    return radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack)
