@@ -99,12 +99,13 @@ def sphere_mirror_scene():
     s = Sphere([0, 0, 0], 1.0)
     n = unit([0.4, 0, 1])
     return Scene([s, s, Plane([0, 0, -1.25], n)],
-                 [M.sphere_row([0, 0, 0], 1.0), M.sphere_row([0, 0, 0], 1.0), M.plane_row([0, 0, -1.25], n, [1, 0, 0])],
+                 [M.sphere_row([0, 0, 0], 1.0), M.sphere_row([0, 0, 0], 1.0),
+                  M.plane_row([0, 0, -1.25], n, [1, 0, 0])],
                  [True, True, False], Plane([4, 0, 0], [-1, 0, 0]))
 
 
-SCENES = {"mirror": mirror_scene, "mirror_grazing": mirror_grazing_scene, "refraction": refraction_scene, "sphere2": sphere_scene,
-          "sphere+mirror3": sphere_mirror_scene}
+SCENES = {"mirror": mirror_scene, "mirror_grazing": mirror_grazing_scene,
+          "refraction": refraction_scene, "sphere2": sphere_scene, "sphere+mirror3": sphere_mirror_scene}
 
 
 def _configs(name, rng, n):

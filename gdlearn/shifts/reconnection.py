@@ -12,7 +12,9 @@ maps the base direction w = (y - x_b)/|y - x_b| to w' = (y - x'_b)/|y - x'_b| an
              = |cos theta'_y| / |cos theta_y| * |x_b - y|^2 / |x'_b - y|^2     (solid-angle form)
 
 with theta_y, theta'_y the angles at y between its normal and the base / offset segment
-(dA_y = d^2 / |cos theta_y| dw, taken on both paths). A medium vertex y (zero normal) has cosine 1.
+(dA_y = d^2 / |cos theta_y| dw, taken on both paths). This is GPM (Hua et al. 2017) Eq. 4's change
+of measure solved for J_w with the area Jacobian set to 1 (see path.jacobian_solid_angle_to_area,
+which turns this J_w back into exactly 1). A medium vertex y (zero normal) has cosine 1.
 
 Reconnection is allowed only when x_b, x'_b and y are connectable (diffuse, glossy above the
 roughness threshold, or medium; :func:`connectable`): at a specular vertex the reconnected direction
@@ -41,8 +43,9 @@ def can_reconnect(class_b, class_b_offset, class_y):
 
 @njit(cache=True)
 def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
-    """|dw'/dw| of the reconnection in the solid-angle measure at x_b (the solid-angle form in the module
-    docstring: Jacobian 1 in area, STAR Sec. 3.3, times dA = d^2/|cos| dw on both paths). Returns 0 when a segment is degenerate or grazes y (then the shift fails)."""
+    """|dw'/dw| of the reconnection in the solid-angle measure at x_b (the solid-angle form in the
+    module docstring: Jacobian 1 in area, STAR Sec. 3.3, times dA = d^2/|cos| dw on both paths).
+    Returns 0 when a segment is degenerate or grazes y (then the shift fails)."""
     d = vec.sub(y, x_b)
     do = vec.sub(y, x_b_offset)
     d2 = vec.dot(d, d)
