@@ -4,6 +4,8 @@ Stops after ``--spp`` samples per pixel or ``--time`` seconds of rendering (JIT 
 counted), whichever comes first. ``--out`` picks the format from its extension (.exr, .png tone-mapped,
 .npy linear float); ``--buffers DIR`` also writes every buffer of the final frame (primal, gradients,
 half-buffers, variances) as .npy. Ctrl-C stops early and still writes what was accumulated.
+For gradient integrators (``--integrator gpt-replay``), ``--recon {cv,cv-weighted,l2,l1}`` writes the
+reconstructed image to ``--out`` instead of the primal (and ``recon.npy`` beside the buffers).
 Scene defaults are overridden with ``--set name=value`` (like ``mitsuba.load_file(path, res=64)``).
 """
 from __future__ import annotations
@@ -28,6 +30,9 @@ def add_parser(subparsers) -> None:
                    help="override a scene <default>, e.g. --set res=64 (repeatable)")
     p.add_argument("--out", required=True, help="output image: .exr, .png or .npy")
     p.add_argument("--buffers", default=None, metavar="DIR", help="also write every buffer as DIR/<name>.npy")
+    p.add_argument("--recon", default="none", choices=("none", "cv", "cv-weighted", "l2", "l1"),
+                   help="gradient integrators: write the image reconstructed by this solver to --out "
+                        "(default none: the primal image)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -81,13 +86,23 @@ def run(args) -> int:
     except KeyboardInterrupt:      # during JIT compilation: nothing accumulated yet
         print("gdlearn render: interrupted before the first pass; nothing written", file=sys.stderr)
         return 130
-    write_image(args.out, frame.primal)
+    image = frame.primal
+    if args.recon != "none":
+        if frame.gx is None or frame.gy is None:
+            print(f"gdlearn render: --recon {args.recon} needs a gradient integrator (e.g. --integrator "
+                  f"gpt-replay); {args.integrator!r} makes only a primal image. Drop --recon.", file=sys.stderr)
+            return 2
+        from gdlearn.experiments.solvers import final_image
+        image = final_image(frame, args.recon)
+    write_image(args.out, image)
     if args.buffers:
         os.makedirs(args.buffers, exist_ok=True)
         import numpy as np
         for name, buf in frame.buffers().items():
             if buf is not None:
                 np.save(os.path.join(args.buffers, f"{name}.npy"), buf)
+        if args.recon != "none":
+            np.save(os.path.join(args.buffers, "recon.npy"), image)
     wall = time.perf_counter() - t0
     msg = (f"{args.out}: {frame.spp} spp in {frame.elapsed:.2f} s rendering "
            f"(+{frame.timings.get('compile', 0.0):.2f} s JIT, {wall:.2f} s total)")
