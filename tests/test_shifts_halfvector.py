@@ -195,6 +195,10 @@ def test_hard_cases_fail_cleanly():
     assert not ok and j == 0.0
     # grazing offset (w'_i in the tangent plane) and an offset arriving from below a reflector
     assert not halfvector_copy(wi, (0.0, 0.6, 0.8), (1.0, 0.0, 0.0), 1.0, False)[2]
+    # an invalid index (eta = 0, NaN) is a flag, not a division by zero
+    for bad in (0.0, np.nan, -1.5):
+        wo, j, ok = halfvector_copy(wi, (0.1, 0.2, -0.97), wi, bad, True)
+        assert not ok and j == 0.0
     # arriving from below a reflector is geometrically a mirror image below (a one-sided BSDF
     # then evaluates to zero: that is the material's business, not the shift's)
     wo, j, ok = halfvector_copy(wi, (0.0, 0.6, 0.8), (0.0, 0.0, -1.0), 1.0, False)

@@ -240,6 +240,11 @@ def test_unreachable_targets_fail_cleanly():
     # degenerate inputs: zero chain length or an endpoint on the chain: flags, no exceptions
     j, ok, it, _ = sc.shift(x_b, chain, x_c, chain[0])
     assert not ok and np.isfinite(j)
+    collapsed = np.zeros((2, 3))
+    j, ok, it, _ = sc.shift(np.zeros(3), collapsed, np.zeros(3), np.zeros(3))
+    assert not ok and j == 0.0
+    j, ok, it, _ = sc.shift(x_b, chain, x_c, np.array([np.nan, 0.0, 0.0]))
+    assert not ok and j == 0.0
 
 
 def test_singular_system_is_reported():

@@ -86,12 +86,12 @@ def sphere_row(center, radius):
     return row
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _v3(a, i, c):
     return (a[i, c], a[i, c + 1], a[i, c + 2])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shape_frame(shapes, j, x):
     """(s, t, n) local frame of chain vertex j at x."""
     if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
@@ -101,7 +101,7 @@ def shape_frame(shapes, j, x):
     return s, t, n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shape_chart(shapes, j, x, u, v):
     """Move x on its surface by (u, v) in the tangent frame (derivative at 0 is orthonormal)."""
     s, t, n = shape_frame(shapes, j, x)
@@ -112,7 +112,7 @@ def shape_chart(shapes, j, x, u, v):
     return vec.add(c, vec.scale(vec.normalize(vec.sub(y, c)), shapes[j, SH_R]))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def shape_contains(shapes, j, x):
     if int(shapes[j, SH_TYPE]) != SHAPE_PLANE:
         return True
@@ -121,7 +121,7 @@ def shape_contains(shapes, j, x):
             and abs(vec.dot(d, _v3(shapes, j, SH_V))) <= shapes[j, SH_EXT + 1])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (wrong side,
     degenerate half vector, vertex off its surface)."""
@@ -147,7 +147,7 @@ def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _max_abs(a, m):
     r = 0.0
     for i in range(m):
@@ -155,7 +155,7 @@ def _max_abs(a, m):
     return r
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_linear(A, B, m, nrhs):
     """Solve A Z = B in place (Gaussian elimination, partial pivoting); Z overwrites B. False if
     A is singular to working precision (numba's np.linalg.solve would raise instead)."""
@@ -191,7 +191,7 @@ def solve_linear(A, B, m, nrhs):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def chain_length_scale(x0, X, xe, k):
     total = vec.norm(vec.sub(_v3(X, 0, 0), x0)) + vec.norm(vec.sub(xe, _v3(X, k - 1, 0)))
     for j in range(k - 1):
@@ -199,12 +199,14 @@ def chain_length_scale(x0, X, xe, k):
     return total / (k + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
     """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) and B = dC/dx_e (2k x 2, tangent
     plane of x_e with normal ne), by central differences. False if a probe is invalid."""
     m = 2 * k
     h = FD_REL_STEP * chain_length_scale(x0, X, xe, k)
+    if not (h > 0.0 and math.isfinite(h)):
+        return False                        # a collapsed or non-finite chain
     Xp = X.copy()
     cp = np.empty(m)
     cm = np.empty(m)
@@ -235,14 +237,14 @@ def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, 
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _moved(X, dX, lam, shapes, k, Xn):
     for j in range(k):
         p = shape_chart(shapes, j, _v3(X, j, 0), lam * dX[2 * j, 0], lam * dX[2 * j + 1, 0])
         Xn[j, 0], Xn[j, 1], Xn[j, 2] = p[0], p[1], p[2]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _norm2(a, m):
     s = 0.0
     for i in range(m):
@@ -250,7 +252,7 @@ def _norm2(a, m):
     return math.sqrt(s)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
     """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
     chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
@@ -290,7 +292,7 @@ def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, ma
     return r < tol, max_iter, r
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
     """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8,
     G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints."""
@@ -307,7 +309,7 @@ def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
     return d, True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
     """Fill targets (k x 2) with the base chain's tangential half-vector components (0 at a perfect
     specular vertex up to round-off); False if the base chain itself is invalid."""
@@ -321,7 +323,7 @@ def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, max_iter):
     """True if the walk from the offset chain back to x_b returns to the base chain: near a caustic
     several chains join the same endpoints and the shift would not be invertible there."""
@@ -338,7 +340,7 @@ def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, ma
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, X_out, max_iter,
                    check_reversible):
     """Shift the specular chain X_base (k x 3) between x_b and x_c to join x'_b and x_c.

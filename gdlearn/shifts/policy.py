@@ -64,7 +64,7 @@ def policy_code(name: str) -> int:
                          f"{', '.join(sorted(POLICIES))}") from None
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def specular_chain_end(vclass, start, n):
     """Index of the first connectable vertex at or after ``start`` (n if none): the chain
     x_start .. x_{end-1} is the run of specular vertices the manifold walk would move."""
@@ -74,7 +74,7 @@ def specular_chain_end(vclass, start, n):
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
     """The action for the segment leaving vertex b >= 1 (module docstring); the primary segment
     (sensor -> x_1) is shifted by the pixel offset itself, which the integrator does.
@@ -105,7 +105,7 @@ def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
     return SHIFT_HALFVECTOR
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def record(stats, action, ok):
     """Count one shift of ``action`` and its outcome in ``stats`` (int64[N_STATS])."""
     stats[action * 3 + OUTCOME_RUN] += 1
