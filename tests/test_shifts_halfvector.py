@@ -297,3 +297,16 @@ def test_whole_path_jacobian_is_the_product_of_vertex_jacobians():
         assert abs(np.prod(js[1:]) / fd - 1) > 1e-3 or abs(js[0] - 1) < 1e-3   # each factor matters
         checked += 1
     assert checked >= 20
+
+
+def test_half_vector_is_the_one_the_bsdf_evaluates():
+    """The copied h is exactly roughdielectric's generalised half vector (the microfacet normal its
+    D(m) is evaluated at), so the offset's microfacet density equals the base's."""
+    from gdlearn.kernels.bsdf_dielectric import _generalized_half_vector
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        wi_b, wo_b, _, eta, _ = _random_local_config(rng)
+        h, _, ok = half_vector(T(wi_b), T(wo_b), eta)
+        m, _, _, ok2 = _generalized_half_vector(T(wi_b), T(wo_b), eta)
+        assert ok and ok2
+        assert np.allclose(h, m, atol=1e-14)
