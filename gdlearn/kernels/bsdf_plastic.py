@@ -17,6 +17,7 @@ Everything that depends only on the material is precomputed by :func:`prepare_pl
 material row: MAT_AUX = F_int (smooth) / internal reflectance (rough), MAT_AUX + 1 = w_s, and for
 ``roughplastic`` the transmittance table in columns PLASTIC_TABLE .. PLASTIC_TABLE + TABLE_RES - 1.
 """
+import functools
 import math
 
 import numpy as np
@@ -24,7 +25,7 @@ from numba import njit
 
 from gdlearn.kernels.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_m, refract_m
 from gdlearn.kernels.layout import (MAT_ALPHA, MAT_AUX, MAT_DIST, MAT_ETA, MAT_NONLINEAR, MAT_R, MAT_SR,
-                                    ROUGHPLASTIC)
+                                    MAT_TYPE, ROUGHPLASTIC)
 from gdlearn.kernels.microfacet import mf_D, mf_G, mf_G1, mf_sample
 from gdlearn.kernels.sampling import square_to_cosine_hemisphere
 
@@ -222,20 +223,32 @@ def prepare_plastic(row: np.ndarray) -> None:
     d_mean, s_mean = float(np.mean(r)), float(np.mean(sr))
     row[AUX_SPEC_WEIGHT] = s_mean / (d_mean + s_mean) if d_mean + s_mean > 0 else 0.5
     eta = float(row[MAT_ETA])
-    if int(row[0]) != ROUGHPLASTIC:
+    if int(row[MAT_TYPE]) != ROUGHPLASTIC:
         row[AUX_FDR] = fresnel_diffuse_reflectance(1.0 / eta)
         return
     if row.shape[0] < ROUGHPLASTIC_WIDTH:
         raise ValueError(f"a roughplastic material row needs {ROUGHPLASTIC_WIDTH} columns (its rough "
-                         f"transmittance table), got {row.shape[0]}; fix: set layout.MAT_WIDTH >= "
-                         f"{ROUGHPLASTIC_WIDTH}")
-    dist, alpha = int(row[MAT_DIST]), max(float(row[MAT_ALPHA]), 1e-4)
+                         f"transmittance table), got {row.shape[0]}; fix: build it with material_row(bsdf, "
+                         f"width={ROUGHPLASTIC_WIDTH}) (scene/compile.py widens the table when needed)")
+    table, internal = rough_plastic_tables(int(row[MAT_DIST]), max(float(row[MAT_ALPHA]), 1e-4), eta)
+    row[PLASTIC_TABLE:PLASTIC_TABLE + TABLE_RES] = table
+    row[AUX_FDR] = internal
+
+
+@functools.lru_cache(maxsize=64)
+def rough_plastic_tables(dist: int, alpha: float, eta: float):
+    """(external transmittance table (TABLE_RES,), internal diffuse reflectance) of a rough dielectric
+    coating, as Mitsuba's ``RoughPlastic::parameters_changed``: T at mu = max(1e-6, linspace(0, 1, 64))
+    by Gauss-Legendre quadrature (32^2 nodes when eta > 1, else 128^2) over the visible-normal sample
+    space, and F_int = 2 * mean(R_internal(mu) * mu). Cached: materials often share (dist, alpha, eta),
+    and a Beckmann table costs ~1-2 s."""
     mu = np.maximum(1e-6, np.linspace(0.0, 1.0, TABLE_RES))
     res = 32 if eta > 1.0 else 128
     nodes, weights = np.polynomial.legendre.leggauss(res)
-    row[PLASTIC_TABLE:PLASTIC_TABLE + TABLE_RES] = _rough_table(dist, alpha, eta, nodes, weights, mu)
+    table = _rough_table(dist, alpha, eta, nodes, weights, mu)
     inv = 1.0 / eta
     res = 32 if inv > 1.0 else 128
     nodes, weights = np.polynomial.legendre.leggauss(res)
     refl = _rough_reflectance(dist, alpha, inv, nodes, weights, mu)
-    row[AUX_FDR] = 2.0 * float(np.mean(refl * mu))
+    table.setflags(write=False)
+    return table, 2.0 * float(np.mean(refl * mu))
