@@ -309,3 +309,27 @@ def test_sampled_lobe_class_of_roughplastic():
             assert np.dot(wo, [-wi[0], -wi[1], wi[2]]) > 0.99
     assert B.sampled_lobe_class(row_of(type="plastic"), wi, 0.0, True, th) == L.V_SPECULAR
     assert B.sampled_lobe_class(row_of(type="diffuse"), wi, 0.0, False, th) == L.V_DIFFUSE
+
+
+RECIPROCAL = [dict(type="diffuse", reflectance=rgb(0.3, 0.6, 0.9)),
+              dict(type="roughconductor", distribution="ggx", alpha=0.3),
+              dict(type="roughconductor", alpha=0.2),
+              dict(type="roughdielectric", distribution="ggx", alpha=0.3),
+              dict(type="plastic", reflectance=rgb(0.3, 0.6, 0.9), int_ior=1.49),
+              dict(type="roughplastic", alpha=0.25, reflectance=rgb(0.3, 0.6, 0.9), int_ior=1.49)]
+
+
+@pytest.mark.parametrize("kw", RECIPROCAL, ids=[k["type"] + "-" + k.get("distribution", "") for k in RECIPROCAL])
+def test_reflection_is_reciprocal(kw):
+    """Helmholtz reciprocity of the reflection lobes: f(wi, wo) = f(wo, wi), i.e.
+    eval(wi, wo) / cos(wo) == eval(wo, wi) / cos(wi) (a physical check independent of Mitsuba)."""
+    row = row_of(**kw)
+    rng = np.random.default_rng(9)
+    d = rng.normal(size=(400, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[:, 2] = np.abs(d[:, 2]) + 1e-3
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    for wi, wo in zip(d[:200], d[200:]):
+        a = np.array(B.bsdf_eval(row, tuple(wi), tuple(wo))) / wo[2]
+        b = np.array(B.bsdf_eval(row, tuple(wo), tuple(wi))) / wi[2]
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-300)
