@@ -156,10 +156,11 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
         else:
             a = first
             b = first + 1
-            if d[node_info[node, 2]] < 0.0:   # visit the near child first
-                a, b = b, a
             ta = _box_hit(nodes, a, o, inv, tmin, best_t)
             tb = _box_hit(nodes, b, o, inv, tmin, best_t)
+            if tb < ta:                        # visit the nearer child first
+                a, b = b, a
+                ta, tb = tb, ta
             if ta < math.inf:
                 if tb < math.inf:
                     stack[sp] = b
