@@ -47,13 +47,14 @@ class PageResult:
     widgets: int = 0                    # rendered widget views
     widget_errors: int = 0
     stores_widgets: bool = False
+    has_math: bool = True               # the page holds TeX for MathJax (a status table may not)
     offsite_scripts: list[str] = field(default_factory=list)
     screenshot: Path | None = None
 
     @property
     def problems(self) -> list[str]:
         out = []
-        if self.math == 0 or self.tex_left:
+        if (self.has_math and self.math == 0) or self.tex_left:
             out.append(f"MathJax did not typeset ({self.math} mjx-container, {self.tex_left} raw TeX spans)")
         if self.stores_widgets and (self.widgets == 0 or self.widget_errors):
             out.append(f"widgets did not render ({self.widgets} views, {self.widget_errors} errors)")
@@ -81,7 +82,8 @@ def _chromium(browser: str, url: str, *extra: str, timeout: float = 120) -> str:
 
 def inspect(browser: str, base: str, page: str, out: Path | None, html: Path = HTML) -> PageResult:
     raw = (html / page).read_text(encoding="utf-8")
-    res = PageResult(page, stores_widgets="application/vnd.jupyter.widget-state+json" in raw)
+    res = PageResult(page, stores_widgets="application/vnd.jupyter.widget-state+json" in raw,
+                     has_math=bool(re.search(r'class="math\b', raw)))
     res.offsite_scripts = [s for s in re.findall(r'<script[^>]*\ssrc="([^"]+)"', raw)
                            if re.match(r"(https?:)?//", s)]
     dom = _chromium(browser, f"{base}/{page}", "--dump-dom")
