@@ -7,7 +7,8 @@ fixed point ``I = F(I)`` iterated from the primal image (Eq. 11):
     uniform  (Eq. 14, Algorithm 1 ``reconstruct``):  I_c' = (I_c + I_r - Gx_c + I_l + Gx_l
                                                                + I_b - Gy_c + I_t + Gy_t) / 5
     weighted (Eq. 20-22):  I_p' = sum_{q in N_p + {p}} w_pq (I_q + <I_p - I_q>),
-                           w_pq = s_pq^-2 / sum_r s_pr^-2,   s_pq^2 = var(I_p^(n)) + var(<I_q - I_p>)
+                           w_pq = s_pq^-2 / sum_r s_pr^-2,
+                           s_pq^2 = var(I_p^(n)) + var(<I_q - I_p>)
 
 For the weighted form the variance of the *iterate* ``var(I_p^(n))`` is unknown; as the STAR says
 (after Eq. 22) it is approximated by the primal variance divided by a constant, here
@@ -175,7 +176,8 @@ def _unmask(v, shape, axis):
         v = np.array(np.broadcast_to(v, shape))
     except ValueError:
         raise ValueError(f"variance of g{axis} has shape {v.shape}, which does not broadcast to "
-                         f"the image shape {shape}; give it as H x W, H x W x 1 or H x W x C") from None
+                         f"the image shape {shape}; give it as H x W, H x W x 1 or H x W x C"
+                         ) from None
     if axis == "x":
         v[:, -1] = 0.0
     else:

@@ -199,6 +199,7 @@ def variances_from_halves(halves: dict) -> dict[str, np.ndarray]:
     for name, pair in halves.items():
         a, b = (np.asarray(v, dtype=np.float64) for v in pair)
         if a.shape != b.shape:
-            raise ValueError(f"halves[{name!r}]: the two halves have shapes {a.shape} and {b.shape}")
+            raise ValueError(f"halves[{name!r}]: the two halves have shapes {a.shape} and "
+                             f"{b.shape}; they must match")
         out[name] = 0.25 * (a - b) ** 2
     return out

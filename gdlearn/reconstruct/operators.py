@@ -28,7 +28,8 @@ def normal_rhs(i0, gx, gy, w0, wx, wy, out):
     for y in prange(h):
         for x in range(w):
             for k in range(c):
-                v = w0[y, x, k] * i0[y, x, k] - wx[y, x, k] * gx[y, x, k] - wy[y, x, k] * gy[y, x, k]
+                v = (w0[y, x, k] * i0[y, x, k] - wx[y, x, k] * gx[y, x, k]
+                     - wy[y, x, k] * gy[y, x, k])
                 if x > 0:
                     v += wx[y, x - 1, k] * gx[y, x - 1, k]
                 if y > 0:

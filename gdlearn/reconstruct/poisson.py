@@ -3,7 +3,7 @@
 Convention (the reference solver of Lehtinen et al. 2013 / Kettunen et al. 2015, ``alpha`` = 0.2 by
 default in both papers' code): the residual vector is ``[alpha (I - I0), Dx I - Gx, Dy I - Gy]``, so
 
-    L2:  E(I) = alpha^2 ||I - I0||^2 + ||Dx I - Gx||^2 + ||Dy I - Gy||^2   (Eq. 18, lambda = alpha^2)
+    L2:  E(I) = alpha^2 ||I - I0||^2 + ||Dx I - Gx||^2 + ||Dy I - Gy||^2  (Eq. 18, lambda = alpha^2)
     L1:  E(I) = sum_p alpha |I_p - I0_p| + |(Dx I - Gx)_p| + |(Dy I - Gy)_p|
 
 where |.| of a colour residual is its Euclidean length over the channels (the reference solver
@@ -11,9 +11,10 @@ reweights a pixel's RGB residual as one vector).
 
 * :func:`poisson_l2` without weights and without missing data is solved exactly by the DCT
   (:mod:`.dct`). With ``weights`` (or with non-finite input, whose terms get weight 0) the weighted
-  normal equations ``(alpha^2 W0 + Dx^T Wx Dx + Dy^T Wy Dy) I = alpha^2 W0 I0 + Dx^T Wx Gx + Dy^T Wy Gy``
+  normal equations
+  ``(alpha^2 W0 + Dx^T Wx Dx + Dy^T Wy Dy) I = alpha^2 W0 I0 + Dx^T Wx Gx + Dy^T Wy Gy``
   are solved by conjugate gradients preconditioned with the DCT solve of the same operator with
-  every weight replaced by its mean.
+  every weight replaced by its mean, rescaled by the diagonal (see _DCTPreconditioner).
 * :func:`poisson_l1` minimises the L1 energy by iteratively reweighted least squares (IRLS, as
   the STAR notes after Eq. 19): the term weights become ``1 / (|e| + eps)`` from the current
   residual ``e``, ``eps`` starting at ``eps0`` and multiplied by ``eps_decay`` per reweighting.
@@ -34,7 +35,7 @@ from .operators import (apply_normal, cg_direction, cg_update, dot_channels,
 __all__ = ["poisson_l2", "poisson_l1", "pcg"]
 
 #: alpha^2 W0 below this fraction of the gradient weights is "pure gradient integration": the
-#: constant mode is then fixed by the data-term balance instead of being solved for (see _fix_constant).
+#: constant mode is then fixed by the data-term balance, not solved for (see _fix_constant).
 NEGLIGIBLE_SCREENING = 1e-12
 
 
