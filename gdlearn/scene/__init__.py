@@ -1,17 +1,16 @@
 """Scene files to arrays: ``load`` (XML subset -> :class:`Scene`), ``effects`` (the effects plan),
-``compile`` (flat numba-ready arrays). See ARCHITECTURE.md, "The road a scene travels"."""
+``compile`` (flat numba-ready arrays). See ARCHITECTURE.md, "The road a scene travels".
+
+``gdlearn.scene.effects`` is the effects module; calling it, ``effects(scene, request)``, is
+``effects.plan(scene, request)``.
+"""
+from . import effects  # noqa: F401  (callable module: effects(scene, request) -> EffectsPlan)
+from .effects import EffectsPlan, plan  # noqa: F401
+from .load import load  # noqa: F401
 from .model import Scene, SceneError  # noqa: F401
 
 
-def __getattr__(name):
-    # Lazy so that `import gdlearn.scene` stays cheap (compile pulls in numba).
-    if name == "load":
-        from .load import load
-        return load
-    if name in ("effects", "EffectsPlan"):
-        from . import effects as _e
-        return getattr(_e, "plan" if name == "effects" else name)
-    if name == "compile":
-        from .compile import compile_scene
-        return compile_scene
-    raise AttributeError(name)
+def compile(scene, plan=None):  # noqa: A001  (the arrow "scene.compile" of ARCHITECTURE.md)
+    """``compile_scene(scene, plan)``: the flat numba-ready arrays (imported lazily: it pulls in numba)."""
+    from .compile import compile_scene
+    return compile_scene(scene, plan)
