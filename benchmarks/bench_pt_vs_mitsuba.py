@@ -125,9 +125,12 @@ def main(argv=None) -> int:
     for name in a.scenes:
         path = ROOT / "scenes" / f"{name}.xml"
         g = time_gdlearn(path, a)
+        print(f"# {name}: gdlearn pt {g['seconds']:.2f} s", file=sys.stderr, flush=True)
         res = {"gdlearn pt": g}
         for v in variants:
             res[f"mitsuba {v}"] = time_mitsuba(path, a, v)
+            print(f"# {name}: mitsuba {v} {res[f'mitsuba {v}']['seconds']:.2f} s", file=sys.stderr,
+                  flush=True)
         for who, r in res.items():
             rows.append((name, who, r["seconds"], n / r["seconds"] / 1e6, g["mean"] / r["mean"],
                          r["seconds"] / g["seconds"], r.get("first", r.get("compile"))))
