@@ -27,10 +27,16 @@ API: every solver returns a :class:`Reconstruction`
   iterate_variance_divisor=5.0)`` -- Eq. 11-14 (uniform, Algorithm 1) and Eq. 20-22 (weighted);
   history: RMS change per iteration. :func:`cv_history` records every iteration (and the error
   against a reference) for plots.
-* :func:`poisson_l2` ``(primal, gx, gy, alpha=0.2, *, weights=None, tol=1e-10, maxiter=500)`` --
-  exact DCT solve (Neumann) or, with weights / missing data, DCT-preconditioned CG.
-* :func:`poisson_l1` ``(primal, gx, gy, alpha=0.2, *, irls_iterations, eps0=0.05, eps_decay=0.5,
-  cg_iterations, tol=0)`` -- IRLS with DCT-preconditioned CG; history: L1 energy per reweighting.
+* :func:`poisson_l2` ``(primal, gx, gy, alpha=0.2, *, weights=None, tol=1e-10, maxiter=500,
+  precond_dtype=np.float64)`` -- exact DCT solve (Neumann) or, with weights / missing data,
+  Jacobi-scaled DCT-preconditioned CG; history: relative residual of the normal equations.
+* :func:`poisson_l1` ``(primal, gx, gy, alpha=0.2, *, irls_iterations=20, eps0=0.05,
+  eps_decay=0.5, cg_iterations=50, tol=1e-2, precond_dtype=np.float32)`` -- IRLS (the reference
+  solver's L1D preset plus an early exit the preconditioner makes effective); history: L1 energy
+  per reweighting.
+
+Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 shared cores, CPU seconds): exact L2
+~0.11 s, 50 uniform CV iterations ~0.5 s, L1 defaults ~14 s (114 CG steps; ~1 s per 10 steps).
 """
 from .control_variates import CVHistory, control_variates, cv_history
 from .conventions import Reconstruction, forward_differences, variances_from_halves
