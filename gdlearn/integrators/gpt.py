@@ -1,0 +1,134 @@
+"""Gradient-domain path tracing with shift mappings ("gpt"; Kettunen et al. 2015, STAR Sec. 3-4.1).
+
+Every base path of pixel p (Mitsuba's ``path``, same kernels and random numbers as ``pt``) is shifted
+to the four neighbours in lockstep by a combined shift policy (:mod:`gdlearn.shifts.policy`), and
+each base / offset contribution pair is weighted by Eq. 17's balance heuristic
+(:mod:`gdlearn.kernels.gpt_path` has the method). The accumulation layout is ``gpt-replay``'s: per
+base pixel a primal buffer and four shift buffers (right, left, down, up), written by one row each,
+combined afterwards into gx, gy -- with weights (1, 1) here, since the MIS weights are inside the
+buffers (forward and backward weights of one path pair sum to one).
+
+Policies shipped: ``replay+reconnection`` and ``halfvector+reconnection`` (the default, Kettunen et
+al.'s and the STAR Fig. 5's best), plus ``replay`` (the same as ``gpt-replay`` with MIS weights,
+which reduce to 1/2 for replay). Manifold exploration and media are not supported by this
+integrator yet (a clear error says so; ``gpt-replay`` handles media).
+
+Frame stats: ``paths``, ``nonfinite_samples`` and, per shift action, ``shift_<action>_{run,ok,failed}``
+(actions: replay, halfvector, reconnection, fail) counted over offset path segments.
+"""
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from ..kernels.bvh import STACK_SIZE
+from ..kernels.gpt_path import gpt_sample
+from ..kernels.gpt_shift import NF, NI
+from ..kernels.rng import rand
+from ..shifts.policy import N_STATS, POLICIES, policy_code, stats_dict
+from ..shifts.replay import combine_gradients
+from .base import PassResult
+from .pt import PathTracer
+
+#: policies whose unbiasedness tests pass (tests/test_gpt.py); manifold is not wired in yet
+SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection")
+DEFAULT_POLICY = "halfvector+reconnection"
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad):
+    """``out`` (5, H, W, 3): [0] primal mean, [1 + k] mean gradient sample of shift k per base pixel.
+    ``stats`` (H, N_STATS) shift counters per row, ``bad`` (H,) dropped non-finite samples."""
+    h, w = out.shape[1], out.shape[2]
+    inv = 1.0 / spp
+    for y in prange(h):
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        of = np.zeros((4, NF))
+        oi = np.zeros((4, NI), dtype=np.int64)
+        diff = np.zeros((4, 3))
+        acc = np.zeros((5, 3))
+        st = stats[y]
+        for x in range(w):
+            key = y * w + x
+            acc[:] = 0.0
+            for s in range(sample0, sample0 + spp):
+                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+                c = gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
+                               threshold, of, oi, diff, st, stack, broken)
+                if not (np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]) and np.all(np.isfinite(diff))):
+                    bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
+                    continue
+                for ch in range(3):
+                    acc[0, ch] += c[ch]
+                    for k in range(4):
+                        acc[1 + k, ch] += diff[k, ch]
+            for j in range(5):
+                for ch in range(3):
+                    out[j, y, x, ch] = acc[j, ch] * inv
+
+
+class GradientPathTracer(PathTracer):
+    """``make("gpt", scene, shift="halfvector+reconnection", seed=0, spp_per_pass=1, effects=None,
+    threads=None, max_depth=None)``; options as :class:`~gdlearn.integrators.pt.PathTracer` plus
+    ``shift``, the policy name (one of :data:`SUPPORTED`)."""
+
+    name = "gpt"
+
+    def __init__(self, scene, *, shift: str = DEFAULT_POLICY, **options):
+        super().__init__(scene, **options)
+        code = policy_code(shift)
+        if shift not in SUPPORTED:
+            raise ValueError(f"gpt: shift policy {shift!r} is not supported by this integrator yet; fix: use "
+                             f"one of {', '.join(SUPPORTED)}")
+        if self.media or any(s.bsdf.type == "null" for s in self.scene.shapes):
+            raise ValueError("gpt: scenes with media or null interfaces are not supported yet; fix: render "
+                             "them with --integrator gpt-replay")
+        assert POLICIES[shift] == code
+        self.shift, self.policy = shift, code
+        #: tests only: gpt_shift.BROKEN_MIS / BROKEN_JACOBIAN make a deliberately biased estimator
+        self._broken = 0
+
+    def trace(self, sample0: int, spp: int):
+        h, w = self.height, self.width
+        out = np.zeros((5, h, w, 3))
+        stats = np.zeros((h, N_STATS), dtype=np.int64)
+        bad = np.zeros(h, dtype=np.int64)
+        old = numba.get_num_threads()
+        if self.threads is not None:
+            numba.set_num_threads(int(self.threads))
+        try:
+            with numba.parallel_chunksize(max(1, h // 32)):
+                gpt_rows(self.sa, self.seed, sample0, spp, self.policy, self.max_depth, self.rr_depth, self.mask,
+                         self.threshold, self._broken, out, stats, bad)
+        finally:
+            numba.set_num_threads(old)
+        return out, stats.sum(axis=0), int(bad.sum())
+
+    def compile(self) -> float:
+        t0 = time.perf_counter()
+        h, w = self.height, self.width
+        self.height, self.width = 2, 2
+        try:
+            self.trace(0, 1)
+        finally:
+            self.height, self.width = h, w
+        return time.perf_counter() - t0
+
+    def render_pass(self, pass_index: int) -> PassResult:
+        t0 = time.perf_counter()
+        out, st, nbad = self.trace(pass_index * self.spp_per_pass, self.spp_per_pass)
+        t1 = time.perf_counter()
+        # MIS weights are already inside the buffers: forward and backward are summed (Eq. 16)
+        gx, gy = combine_gradients(out[1:], (1.0, 1.0))
+        t2 = time.perf_counter()
+        stats = {"paths": self.width * self.height * self.spp_per_pass, "nonfinite_samples": nbad}
+        for action, c in stats_dict(st).items():
+            if action == "manifold":
+                continue
+            for outcome, v in c.items():
+                stats[f"shift_{action}_{outcome}"] = v
+        return PassResult(images={"primal": out[0], "gx": gx, "gy": gy}, spp=self.spp_per_pass,
+                          timings={"trace": t1 - t0, "combine": t2 - t1}, stats=stats)

@@ -1,0 +1,324 @@
+"""Gradient-domain path tracing on surfaces: one base path and its four offset paths in lockstep
+(Kettunen et al. 2015; STAR, Hua et al. 2019, Sec. 3-4.1, Eq. 15-17).
+
+The base path is Mitsuba's ``path`` (:mod:`gdlearn.kernels.surface_path`: NEE + BSDF sampling with
+the power heuristic, Russian roulette), with the same random numbers, so the primal image of one
+seed equals ``pt``'s up to the roulette (see below). Each offset path starts through the neighbouring
+pixel with the same sub-pixel jitter and is shifted one segment at a time as the base is extended
+(:func:`gdlearn.kernels.gpt_shift.decide`): replay, half-vector copy, or -- once x_i, x'_i and x_{i+1}
+are connectable -- reconnection to x_{i+1}, after which the offset shares the base's vertices (it keeps
+its own incoming direction at x_{i+1} and is identical from x_{i+2} on). Every next-event sample of
+the base is shifted by reconnecting the offset vertex to the *same* light point (area Jacobian 1).
+
+Eq. 16-17. Each base contribution C = f(x)/p(x) of one technique (an emitter hit or a next-event
+sample at some depth) and the offset's C' = f(T x)|J|/p(x) form the gradient sample
+
+    w (C' - C),    w = p(x) / (p(x) + p'(T x) |J|)   (balance heuristic, ratio / log form)
+
+added to the shift's buffer of the base pixel; a failed shift contributes -C (w = 1, STAR Sec. 3.5).
+Since the backward shift from the neighbour carries the weight 1 - w of the same path pair, the
+forward and backward buffers are *summed* (weights 1, 1) in :func:`gdlearn.shifts.replay.combine_gradients`.
+The MIS densities leave out Russian roulette (any density function used consistently on both sides
+gives weights that sum to one); the estimator itself divides by the base's roulette probability.
+
+Russian roulette uses max(base, offset) throughput, so a base path that turns black (a black
+material) keeps going while an offset can still contribute: otherwise the forward shift of those
+paths would never be sampled and their gradient would be lost.
+
+Effects: every contribution is kept only if the class of *its own* path is wanted (the base's and
+each offset's class are tracked separately); the early stop of ``radiance_path`` is not used, since
+an offset can reach a wanted class the base cannot.
+"""
+import math
+
+from numba import njit
+
+from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lobe_class,
+                                  sampled_lobe_class, vertex_class)
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.geometry import offset_origin
+from gdlearn.kernels.gpt_shift import (BROKEN_MIS, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+                                       I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
+                                       I_STATE, JOINED, MERGED, FREE, conn, decide, emitted, get3,
+                                       mul3, nee_at, sc3, set3, shift_direction, vclass_of, _update)
+from gdlearn.kernels.bsdf import bsdf_eval, bsdf_pdf
+from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, sample_emitter
+from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
+from gdlearn.kernels.rng import rand
+from gdlearn.kernels.scene_query import intersect
+from gdlearn.kernels.surface_path import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
+from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
+from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, record
+from gdlearn.shifts.replay import neighbour_inside, offset_film_position
+
+ONE3 = (1.0, 1.0, 1.0)
+#: alive flags: shift not traced (outside the image), failed, alive
+OUTSIDE, FAILED, ALIVE = -1, 0, 1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _wanted(mask, state):
+    return (mask >> pc_class(state)) & 1 == 1
+
+
+@njit(cache=True, error_model="numpy")
+def _set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
+    """Make (p, ng, ns) of primitive prim, reached along d, offset k's current vertex."""
+    set3(of, k, F_POS, p)
+    set3(of, k, F_NG, ng)
+    set3(of, k, F_NS, ns)
+    set3(of, k, F_WI, (-d[0], -d[1], -d[2]))
+    oi[k, I_ESCAPED] = 0 if hit else 1
+    oi[k, I_PRIM] = prim
+    oi[k, I_MAT] = sa.prim_info[prim, 1] if hit else -1
+
+
+@njit(cache=True, error_model="numpy")
+def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
+    """The pixel shift (Eq. 3): each neighbour's camera ray with the base's sub-pixel jitter."""
+    for k in range(4):
+        if not neighbour_inside(x, y, k, w, h):
+            oi[k, I_ALIVE] = OUTSIDE
+            continue
+        ox, oy = offset_film_position(fx, fy, k)
+        o, d, tmax = camera_ray(sa.camera, ox, oy)
+        hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
+        _set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d)
+        set3(of, k, F_BETA, ONE3)
+        of[k, F_LR] = 0.0
+        of[k, F_PREV_PDF] = 1.0
+        set3(of, k, F_PREV_P, o)
+        oi[k, I_PREV_DELTA] = 1
+        oi[k, I_RECONN] = FREE
+        oi[k, I_STATE] = pc_init()
+        oi[k, I_ALIVE] = ALIVE
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pair(diff, of, oi, k, co, cb, broken):
+    """Eq. 16 with Eq. 17's weight for one technique: w (C' - C), or -C for a failed shift."""
+    if oi[k, I_ALIVE] == ALIVE:
+        wgt = 1.0 if broken == BROKEN_MIS else mis_weight_from_log_ratio(of[k, F_LR])
+        for c in range(3):
+            diff[k, c] += wgt * (co[c] - cb[c])
+    elif oi[k, I_ALIVE] == FAILED:
+        for c in range(3):
+            diff[k, c] -= cb[c]
+
+
+@njit(cache=True, error_model="numpy")
+def _emission_pairs(sa, of, oi, diff, cb, mask, broken):
+    for k in range(4):
+        co = (0.0, 0.0, 0.0)
+        if oi[k, I_ALIVE] == ALIVE and _wanted(mask, oi[k, I_STATE]):
+            wi = get3(of, k, F_WI)
+            le = emitted(sa, oi[k, I_ESCAPED] == 1, oi[k, I_PRIM], get3(of, k, F_POS), get3(of, k, F_NS),
+                         (-wi[0], -wi[1], -wi[2]), get3(of, k, F_PREV_P), of[k, F_PREV_PDF],
+                         oi[k, I_PREV_DELTA] == 1)
+            co = mul3(get3(of, k, F_BETA), le)
+        _pair(diff, of, oi, k, co, cb, broken)
+
+
+@njit(cache=True, error_model="numpy")
+def _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack):
+    """Shift the base's next-event sample (light point q, unweighted value nb) to every offset by
+    reconnecting to the same light point (for a constant / directional emitter: the same direction)."""
+    fixed_point = True
+    et = int(sa.emitters[em, EM_TYPE])
+    if not (et == E_AREA or et == E_POINT or et == E_SPOT):
+        fixed_point = False
+    for k in range(4):
+        co = (0.0, 0.0, 0.0)
+        if oi[k, I_ALIVE] == ALIVE:
+            mat_o = sa.materials[oi[k, I_MAT]]
+            if _wanted(mask, pc_push(oi[k, I_STATE], vertex_class(mat_o, threshold))):
+                if oi[k, I_RECONN] == MERGED:
+                    no = nb
+                else:
+                    po = get3(of, k, F_POS)
+                    qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
+                    no = nee_at(sa, em, qo, nq, po, get3(of, k, F_NG), get3(of, k, F_NS), get3(of, k, F_WI),
+                                mat_o, stack)
+                co = mul3(get3(of, k, F_BETA), no)
+        _pair(diff, of, oi, k, co, cb, broken)
+
+
+@njit(cache=True, error_model="numpy")
+def _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold):
+    """Offset k shares the base vertex p: same outgoing direction (J = 1). A JOINED offset arrives
+    from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
+    if oi[k, I_RECONN] == JOINED:
+        if delta:
+            oi[k, I_ALIVE] = FAILED
+            return
+        ns = get3(of, k, F_NS)
+        s, t = coordinate_system(ns)
+        wi_o = to_local(get3(of, k, F_WI), s, t, ns)
+        f = bsdf_eval(mat, wi_o, wo)
+        pdf_o = bsdf_pdf(mat, wi_o, wo)
+        _update(of, k, f, 1.0, pdf_o, pdf)
+        of[k, F_PREV_PDF] = pdf_o
+        oi[k, I_PREV_DELTA] = 0
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat, False, threshold))
+        oi[k, I_RECONN] = MERGED
+    else:                                   # identical to the base: f' / p = the base's weight
+        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight))
+        of[k, F_PREV_PDF] = pdf
+        oi[k, I_PREV_DELTA] = 1 if delta else 0
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], cls_b)
+    set3(of, k, F_PREV_P, p)
+
+
+@njit(cache=True, error_model="numpy")
+def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta, us, hit2, prim2, p2, ng2,
+                   ns2, d2, threshold, broken, stats, stack):
+    """Shift offset k's segment leaving its vertex i (base: wi -> wo, next vertex p2 or escape)."""
+    if oi[k, I_ESCAPED] == 1:
+        record(stats, SHIFT_FAIL, False)
+        oi[k, I_ALIVE] = FAILED
+        return
+    mat_o = sa.materials[oi[k, I_MAT]]
+    action = decide(policy, cls_b, vertex_class(mat_o, threshold), cls_next)
+    if action == SHIFT_FAIL:
+        record(stats, SHIFT_FAIL, False)
+        oi[k, I_ALIVE] = FAILED
+        return
+    p_o = get3(of, k, F_POS)
+    ng_o = get3(of, k, F_NG)
+    wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, p, wi, wo, pdf, delta, us[0],
+                                                     us[1], us[2], p2, ng2, threshold, broken, stack)
+    if ok and action == SHIFT_RECONNECT:
+        _set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
+        oi[k, I_RECONN] = JOINED
+    elif ok:
+        hit, _, prim, q, ng, ns, _ = intersect(sa, offset_origin(p_o, ng_o, wo_w), wo_w, 0.0, math.inf, stack)
+        _set_hit(sa, of, oi, k, hit, prim, q, ng, ns, wo_w)
+        # the next vertices must agree in kind, else the reverse shift would choose differently
+        ok = conn(vclass_of(sa, not hit, prim, threshold)) == conn(cls_next) and hit == hit2
+    record(stats, action, ok)
+    if not ok:
+        oi[k, I_ALIVE] = FAILED
+        return
+    set3(of, k, F_PREV_P, p_o)
+    of[k, F_PREV_PDF] = pdf_o
+    oi[k, I_PREV_DELTA] = 1 if delta_o else 0
+    oi[k, I_STATE] = pc_push(oi[k, I_STATE], lcls)
+
+
+@njit(cache=True, error_model="numpy")
+def _fail_mismatched(sa, mat, oi, stats, threshold):
+    """Before the base extends its vertex x_i (next event, next bounce), fail every offset whose x'_i
+    is of another kind: escaped (no vertex to continue from), connectable vs not, or delta-only vs
+    not (the neighbour's tracer would not even try next-event estimation there, so a next-event
+    pair would get weight 1/2 with no backward partner). Each rule is symmetric in x_i and x'_i,
+    so the backward shift fails on the same pairs (STAR Sec. 3.5: weight 1, offset 0)."""
+    cb = conn(vertex_class(mat, threshold))
+    db = bsdf_is_delta_only(mat)
+    for k in range(4):
+        if oi[k, I_ALIVE] != ALIVE or oi[k, I_RECONN] != FREE:
+            continue
+        bad = oi[k, I_ESCAPED] == 1
+        if not bad:
+            mo = sa.materials[oi[k, I_MAT]]
+            bad = conn(vertex_class(mo, threshold)) != cb or bsdf_is_delta_only(mo) != db
+        if bad:
+            record(stats, SHIFT_FAIL, False)
+            oi[k, I_ALIVE] = FAILED
+
+
+@njit(cache=True, error_model="numpy")
+def _roulette(of, oi, beta, eta, u):
+    """Mitsuba's survival q = min(max throughput * eta^2, 0.95), the max taken over the base and the
+    live offsets; returns q (0: stop). Survivors' throughputs are divided by q by the caller."""
+    m = max3(beta)
+    for k in range(4):
+        if oi[k, I_ALIVE] == ALIVE:
+            m = max(m, max3(get3(of, k, F_BETA)))
+    q = min(m * eta * eta, 0.95)
+    if not q > 0.0 or u >= q:
+        return 0.0
+    return q
+
+
+@njit(cache=True, error_model="numpy")
+def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask, threshold,
+               of, oi, diff, stats, stack, broken=0):
+    """One base path through film point (fx, fy) of pixel (x, y) and its four shifts. Returns the
+    base radiance (the primal sample); ``diff[k]`` receives the gradient sample of shift k (right,
+    left, down, up), zero for a shift outside the image."""
+    diff[:] = 0.0
+    o, d, tmax = camera_ray(sa.camera, fx, fy)
+    hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
+    _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack)
+    beta = ONE3
+    eta = 1.0
+    prev_p, prev_pdf, prev_delta = o, 1.0, True
+    state = pc_init()
+    L = (0.0, 0.0, 0.0)
+    depth = 0
+    n_em = sa.emitters.shape[0]
+    while True:
+        cb = (0.0, 0.0, 0.0)
+        if _wanted(mask, state):
+            cb = mul3(beta, emitted(sa, not hit, prim, p, ns, d, prev_p, prev_pdf, prev_delta))
+        L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
+        _emission_pairs(sa, of, oi, diff, cb, mask, broken)
+        if not hit or depth + 1 >= max_depth:
+            break
+        mat = sa.materials[sa.prim_info[prim, 1]]
+        _fail_mismatched(sa, mat, oi, stats, threshold)
+        sf, tf = coordinate_system(ns)
+        wi_world = (-d[0], -d[1], -d[2])
+        wi = to_local(wi_world, sf, tf, ns)
+        if not bsdf_is_delta_only(mat) and n_em > 0:
+            u_sel = rand(seed, key, s, dim(depth, D_EM_SEL))
+            em_b, q, nq, _, _, _, _, _, _ = sample_emitter(
+                sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel,
+                rand(seed, key, s, dim(depth, D_EM_U1)), rand(seed, key, s, dim(depth, D_EM_U2)))
+            # the chosen emitter even when the sample is black for the base (back side): an
+            # offset may still see the light point's front
+            em = min(int(u_sel * n_em), n_em - 1)
+            nb = (0.0, 0.0, 0.0)
+            if em_b >= 0:
+                nb = nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack)
+            cb = (0.0, 0.0, 0.0)
+            if _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
+                cb = mul3(beta, nb)
+            L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
+            _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack)
+        u_lobe = rand(seed, key, s, dim(depth, D_LOBE))
+        u1 = rand(seed, key, s, dim(depth, D_BSDF_U1))
+        u2 = rand(seed, key, s, dim(depth, D_BSDF_U2))
+        wo, weight, pdf, delta = bsdf_sample(mat, wi, u_lobe, u1, u2)
+        if not pdf > 0.0:
+            break
+        cls_b = sampled_lobe_class(mat, wi, u_lobe, delta, threshold)
+        d2 = to_world(wo, sf, tf, ns)
+        hit2, _, prim2, p2, ng2, ns2, _ = intersect(sa, offset_origin(p, ng, d2), d2, 0.0, math.inf, stack)
+        cls_next = vclass_of(sa, not hit2, prim2, threshold)
+        for k in range(4):
+            if oi[k, I_ALIVE] != ALIVE:
+                continue
+            if oi[k, I_RECONN] != FREE:
+                _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
+                if oi[k, I_ALIVE] == ALIVE:
+                    _set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
+            else:
+                _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta, (u_lobe, u1, u2),
+                               hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
+        beta = mul3(beta, weight)
+        eta *= bsdf_eta(mat, wi, wo)
+        prev_p, prev_pdf, prev_delta = p, pdf, delta
+        state = pc_push(state, cls_b)
+        hit, prim, p, ng, ns, d = hit2, prim2, p2, ng2, ns2, d2
+        depth += 1
+        if depth >= rr_depth:
+            q_rr = _roulette(of, oi, beta, eta, rand(seed, key, s, dim(depth - 1, D_RR)))
+            if q_rr == 0.0:
+                break
+            beta = sc3(beta, 1.0 / q_rr)
+            for k in range(4):
+                if oi[k, I_ALIVE] == ALIVE:
+                    set3(of, k, F_BETA, sc3(get3(of, k, F_BETA), 1.0 / q_rr))
+    return L

@@ -1,0 +1,241 @@
+"""Per-vertex pieces of gradient-domain path tracing with shift mappings (Kettunen et al. 2015; STAR,
+Hua et al. 2019, Sec. 3-4.1): emission and next-event terms evaluated on an *offset* vertex, and the
+shift of one path segment (replay, half-vector copy, reconnection). The lockstep loop that calls
+them is :mod:`gdlearn.kernels.gpt_path`.
+
+Measure. A camera path is parametrised by its film point and the direction sampled at every vertex
+(solid angle, or a discrete lobe probability at a delta lobe); a next-event vertex z on a light by
+its area measure. In that measure the integrand of one vertex is ``bsdf_eval`` (f |cos theta_o|),
+and the shift's Jacobian is a product of per-vertex factors: 1 for the film move (one pixel, same
+jitter), ``J_w`` of the half-vector copy (:mod:`gdlearn.shifts.halfvector`), the solid-angle form of
+the reconnection (:mod:`gdlearn.shifts.reconnection`), p_b / p_o for replay, 1 for a copied delta
+lobe or a shared direction, and 1 for the light point (area measure, STAR Sec. 3.3).
+
+Offset state (one row per neighbour, arrays ``of`` float64 and ``oi`` int64, columns below): the
+offset vertex, its incoming direction, the offset throughput ``beta' = prod f'_j J_j / p_j`` (base
+densities p_j, so beta' * Le is f(T x) |J| / p(x) of Eq. 16), and ``lr = sum log(p'_j J_j / p_j)``,
+the log of the density ratio that Eq. 17's MIS weight needs (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`).
+"""
+import math
+
+from numba import njit
+
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, lobe_class, vertex_class
+from gdlearn.kernels.lights import (E_AREA, E_POINT, E_SPOT, EM_AREA, EM_RGB, EM_TYPE, INV_FOUR_PI,
+                                    E_CONSTANT, emitter_pdf, eval_emitter, spot_falloff)
+from gdlearn.kernels.sampling import power_heuristic
+from gdlearn.kernels.scene_query import occluded
+from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
+from gdlearn.shifts.halfvector import halfvector_copy_mat
+from gdlearn.shifts.policy import (POLICY_REPLAY, POLICY_REPLAY_RECONNECTION, SHIFT_FAIL,
+                                   SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY)
+from gdlearn.shifts.reconnection import connectable, reconnect
+
+ZERO3 = (0.0, 0.0, 0.0)
+#: deliberately broken variants, for tests that must be able to fail: Eq. 17 weight 1 on both sides;
+#: the reconnection's solid-angle Jacobian replaced by 1
+BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN = 0, 1, 2
+#: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
+ESCAPED = -1
+
+# float columns of ``of``
+F_POS, F_NG, F_NS, F_WI, F_BETA, F_LR, F_PREV_PDF, F_PREV_P = 0, 3, 6, 9, 12, 15, 16, 17
+NF = 20
+# int columns of ``oi``
+I_ALIVE, I_MAT, I_RECONN, I_PREV_DELTA, I_ESCAPED, I_STATE, I_PRIM = range(7)
+NI = 7
+# I_RECONN values: not yet joined, joined at this vertex (own incoming direction), identical to base
+FREE, JOINED, MERGED = 0, 1, 2
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def get3(a, k, j):
+    return (a[k, j], a[k, j + 1], a[k, j + 2])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def set3(a, k, j, v):
+    a[k, j] = v[0]
+    a[k, j + 1] = v[1]
+    a[k, j + 2] = v[2]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def mul3(a, b):
+    return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def sc3(a, s):
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(cache=True, error_model="numpy")
+def emitted(sa, escaped, prim, p, ns, d, prev_p, prev_pdf, prev_delta):
+    """Le seen along the travel direction d at hit p (or the constant emitter on escape), MIS-weighted
+    against next-event estimation from prev_p exactly as ``surface_path.radiance_path`` does."""
+    if escaped:
+        if sa.env < 0:
+            return ZERO3
+        le = eval_emitter(sa.emitters, sa.env, d, d)
+        w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, sa.env, prev_p, d, d))
+        return sc3(le, w)
+    em = sa.prim_info[prim, 2]
+    if em < 0:
+        return ZERO3
+    le = eval_emitter(sa.emitters, em, ns, d)
+    if not (le[0] + le[1] + le[2] > 0.0):
+        return ZERO3
+    w = 1.0 if prev_delta else power_heuristic(prev_pdf, emitter_pdf(sa.emitters, em, prev_p, p, ns))
+    return sc3(le, w)
+
+
+@njit(cache=True, error_model="numpy")
+def light_weight(sa, em, q, nq, p):
+    """``(Le / pdf_sa, pdf_sa, is_delta, dir p->q)`` of a *fixed* light point q (normal nq) of emitter
+    em seen from p: the next-event weight of ``lights.sample_emitter`` re-evaluated at another
+    shading point. For an area light the density is the same area density at q for every p (the
+    light point is shared by base and offset, area Jacobian 1), converted to solid angle at p."""
+    n_em = sa.emitters.shape[0]
+    et = int(sa.emitters[em, EM_TYPE])
+    dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+    d2 = dot(dv, dv)
+    if not d2 > 0.0:
+        return ZERO3, 0.0, False, ZERO3
+    dist = math.sqrt(d2)
+    dl = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
+    rgb = get3(sa.emitters, em, EM_RGB)
+    sel = 1.0 / n_em
+    if et == E_AREA:
+        cos_q = -dot(dl, nq)
+        if not cos_q > 0.0:          # back of a one-sided emitter
+            return ZERO3, 0.0, False, dl
+        pdf = sel / sa.emitters[em, EM_AREA] * d2 / cos_q
+        return sc3(rgb, 1.0 / pdf), pdf, False, dl
+    if et == E_POINT or et == E_SPOT:
+        f = 1.0 / (d2 * sel)
+        if et == E_SPOT:
+            f *= spot_falloff(sa.emitters, em, (-dl[0], -dl[1], -dl[2]))
+        return sc3(rgb, f), sel, True, dl
+    if et == E_CONSTANT:             # direction copied by the caller (q = p + the base's offset)
+        pdf = sel * INV_FOUR_PI
+        return sc3(rgb, 1.0 / pdf), pdf, False, dl
+    return sc3(rgb, 1.0 / sel), sel, True, dl      # directional
+
+
+@njit(cache=True, error_model="numpy")
+def nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack):
+    """Next-event contribution (without throughput) of light point q at a surface vertex p whose path
+    arrives from wi_world: f(wi, wo) |cos| Le / pdf, MIS (power heuristic) against BSDF sampling."""
+    w_em, pdf_em, delta, dl = light_weight(sa, em, q, nq, p)
+    if not (w_em[0] + w_em[1] + w_em[2] > 0.0):
+        return ZERO3
+    s, t = coordinate_system(ns)
+    wi = to_local(wi_world, s, t, ns)
+    wo = to_local(dl, s, t, ns)
+    f = bsdf_eval(mat, wi, wo)
+    if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+        return ZERO3
+    if occluded(sa, p, ng, q, stack):
+        return ZERO3
+    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+    return sc3(mul3(f, w_em), w)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def vclass_of(sa, escaped, prim, threshold):
+    """The material class of a hit (``bsdf.vertex_class``), ESCAPED for a path that left the scene."""
+    if escaped:
+        return ESCAPED
+    return vertex_class(sa.materials[sa.prim_info[prim, 1]], threshold)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def conn(c):
+    return c != ESCAPED and connectable(c)
+
+
+@njit(cache=True, error_model="numpy")
+def decide(policy, cls_b, cls_o, cls_next):
+    """The action for the segment leaving vertex i (``policy.choose_shift`` with the next base vertex
+    known): fail if base and offset disagree on connectability (not invertible, Kettunen et al.
+    2015), reconnect when x_i, x'_i and x_{i+1} are connectable, else replay or half-vector copy.
+    ``cls_b`` is the class of the lobe the base sampled (V_SPECULAR for a delta lobe)."""
+    cb = conn(cls_b)
+    if cb != conn(cls_o):
+        return SHIFT_FAIL
+    if policy == POLICY_REPLAY:
+        return SHIFT_REPLAY
+    if cb and conn(cls_next):
+        return SHIFT_RECONNECT
+    if policy == POLICY_REPLAY_RECONNECTION:
+        return SHIFT_REPLAY
+    return SHIFT_HALFVECTOR
+
+
+@njit(cache=True, error_model="numpy")
+def same_delta_lobe(mat, wi, refl):
+    """Sample the offset's delta lobe of the same kind as the base's (reflection if ``refl`` else
+    transmission): the half-vector copy at a smooth interface (h = n, Jacobian 1). Returns
+    ``(wo, weight, pdf, ok)``; the lobe is found by the extreme lobe-selection numbers (Mitsuba's
+    dielectric reflects for u <= F, plastics pick their coating first)."""
+    for u in (0.0, 0.9999999999999999):
+        wo, wt, pdf, dl = bsdf_sample(mat, wi, u, 0.5, 0.5)
+        if dl and pdf > 0.0 and ((wo[2] * wi[2] > 0.0) == refl):
+            return wo, wt, pdf, True
+    return ZERO3, ZERO3, 0.0, False
+
+
+@njit(cache=True, error_model="numpy")
+def shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, u_lobe, u1, u2, x_next,
+                    ng_next, threshold, broken, stack):
+    """Shift the segment leaving offset vertex k by ``action`` (base: local wi_b -> wo_b sampled with
+    density pdf_b). Updates beta' and lr in place and returns ``(wo_world, ok, lobe_class', pdf', delta')``.
+    For a reconnection wo_world points at x_next and visibility has been tested."""
+    p_o = get3(of, k, F_POS)
+    ns_o = get3(of, k, F_NS)
+    s, t = coordinate_system(ns_o)
+    wi_o = to_local(get3(of, k, F_WI), s, t, ns_o)
+    if action == SHIFT_REPLAY:           # Sec. 3.1: the base's random numbers, J = p_b / p'
+        wo, wt, pdf, dl = bsdf_sample(mat_o, wi_o, u_lobe, u1, u2)
+        if not pdf > 0.0 or dl != delta_b:
+            return ZERO3, False, 0, 0.0, False
+        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), wt))          # f' J / p_b = f' / p'
+        return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, threshold), pdf, dl
+    if action == SHIFT_RECONNECT:        # Sec. 3.3: join x'_i to x_{i+1}, area Jacobian 1
+        w_b, _, _, j_sa, ok = reconnect(x_b, p_o, x_next, ng_next)
+        if not ok:
+            return ZERO3, False, 0, 0.0, False
+        if broken == BROKEN_JACOBIAN:
+            j_sa = 1.0
+        if occluded(sa, p_o, get3(of, k, F_NG), x_next, stack):
+            return ZERO3, False, 0, 0.0, False
+        wo = to_local(w_b, s, t, ns_o)
+        f = bsdf_eval(mat_o, wi_o, wo)
+        pdf = bsdf_pdf(mat_o, wi_o, wo)
+        _update(of, k, f, j_sa, pdf, pdf_b)
+        return w_b, True, lobe_class(mat_o, False, threshold), pdf, False
+    # Sec. 3.2, Eq. 15: half-vector copy
+    if delta_b:
+        wo, wt, pdf, ok = same_delta_lobe(mat_o, wi_o, wi_b[2] * wo_b[2] > 0.0)
+        if not ok:
+            return ZERO3, False, 0, 0.0, False
+        _update(of, k, sc3(wt, pdf), 1.0, pdf, pdf_b)
+        return to_world(wo, s, t, ns_o), True, L.V_SPECULAR, pdf, True
+    wo, j, ok = halfvector_copy_mat(mat_o, wi_b, wo_b, wi_o, False)
+    if not ok:
+        return ZERO3, False, 0, 0.0, False
+    f = bsdf_eval(mat_o, wi_o, wo)
+    pdf = bsdf_pdf(mat_o, wi_o, wo)
+    _update(of, k, f, j, pdf, pdf_b)
+    return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, False, threshold), pdf, False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _update(of, k, f, j, pdf_o, pdf_b):
+    """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0: Eq. 17 then
+    gives the base weight 1, as it must for a path the neighbour's tracer never samples)."""
+    set3(of, k, F_BETA, sc3(mul3(get3(of, k, F_BETA), f), j / pdf_b))
+    r = pdf_o * j / pdf_b
+    of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
