@@ -34,8 +34,8 @@ from gdlearn.shifts.reconnection import connectable, reconnect
 
 ZERO3 = (0.0, 0.0, 0.0)
 #: deliberately broken variants, for tests that must be able to fail: Eq. 17 weight 1 on both sides;
-#: the reconnection's solid-angle Jacobian replaced by 1
-BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN = 0, 1, 2
+#: the reconnection's solid-angle Jacobian replaced by 1; the half-vector copy's J_w replaced by 1
+BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN = 0, 1, 2, 3
 #: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
 ESCAPED = -1
 
@@ -226,6 +226,8 @@ def shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, u
     wo, j, ok = halfvector_copy_mat(mat_o, wi_b, wo_b, wi_o, False)
     if not ok:
         return ZERO3, False, 0, 0.0, False
+    if broken == BROKEN_HV_JACOBIAN:
+        j = 1.0
     f = bsdf_eval(mat_o, wi_o, wo)
     pdf = bsdf_pdf(mat_o, wi_o, wo)
     _update(of, k, f, j, pdf, pdf_b)
