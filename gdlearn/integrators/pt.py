@@ -23,17 +23,23 @@ from ..kernels.rng import rand
 from ..kernels.surface_path import radiance_path
 from ..kernels.volume_path import radiance_volpath
 from ..scene.effects import plan as effects_plan
-from ..scene.compile import compile_scene
+from ..scene.compile import borrowed, compile_scene
 from .base import PassResult, ProgressiveIntegrator
 
 #: Mitsuba's max_depth = -1 (unbounded) as a loop bound; Russian roulette ends such paths.
 UNBOUNDED = 1 << 30
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy")
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
     every pixel into ``out`` (H x W x 3); ``bad[y]`` counts the non-finite samples dropped in row y."""
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed)
+    _rows_path(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
     for y in prange(h):
@@ -59,9 +65,15 @@ def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
         bad[y] = nbad
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy")
 def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed)
+    _rows_volpath(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
     for y in prange(h):

@@ -13,7 +13,9 @@ and the shift mappings that re-evaluate vertices:
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from .bvh import STACK_SIZE, any_hit, closest_hit
 from .camera import camera_raster, camera_ray  # noqa: F401  (re-exported)
@@ -103,3 +105,33 @@ def light_eval(sa, prim, ns, d):
 def material_of(sa, prim):
     """The material row of a primitive."""
     return sa.materials[sa.prim_info[prim, INFO_MAT]]
+
+
+# ------------------------------------------------------------------------------ borrowed arrays
+# Every numba array carries a reference count (its "meminfo") that compiled code increments and
+# decrements atomically whenever an array is passed to or returned from a non-inlined function. The
+# path kernels pass the scene's arrays through dozens of such calls per bounce; with two threads
+# both cores then hammer the *same* counters (one per scene array), and the cache line ping-pong
+# cost more than the arithmetic: 2 threads rendered barely faster than 1. A *borrowed* array is the
+# same data pointer, shape and strides with no meminfo, so every count becomes a null check. It is
+# valid only while the owner is alive, i.e. inside one kernel call that holds the original ``sa``.
+
+@intrinsic
+def borrow(typingctx, arr):
+    """``arr`` without a reference count (same type, data, shape, strides); see the note above."""
+    if not isinstance(arr, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        src = context.make_array(arr)(context, builder, value=args[0])
+        dst = context.make_array(arr)(context, builder)
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        dst.nitems = src.nitems
+        dst.itemsize = src.itemsize
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        return dst._getvalue()
+
+    return arr(arr), codegen

@@ -30,12 +30,14 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from ..kernels import bvh as _bvh
 from ..kernels import geometry as g
 from ..kernels import layout as L
 from ..kernels import lights as li
 from ..kernels.camera import camera_row
+from ..kernels.scene_query import borrow
 from .model import Scene, SceneError
 
 
@@ -63,6 +65,19 @@ class SceneArrays(NamedTuple):
     def height(self) -> int:
         return int(self.camera[15])
 
+
+
+@njit(cache=True)
+def borrowed(sa):
+    """``sa`` with every array borrowed (no reference counting; :func:`kernels.scene_query.borrow`).
+
+    Call it once at the top of a parallel kernel and pass the result down: the arrays are shared by
+    all threads, and their atomic reference counts were the path tracer's scaling bottleneck. Only
+    valid while ``sa`` itself is alive (for the duration of that kernel call)."""
+    return SceneArrays(borrow(sa.prims), borrow(sa.prim_info), borrow(sa.prim_area), borrow(sa.nodes),
+                       borrow(sa.node_info), borrow(sa.materials), borrow(sa.media), borrow(sa.emitters),
+                       borrow(sa.em_prims), borrow(sa.em_cdf), borrow(sa.camera), borrow(sa.bsphere),
+                       sa.env, sa.camera_medium)
 
 # ----------------------------------------------------------------------------------- tessellation
 _RECT = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
