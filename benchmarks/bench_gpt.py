@@ -10,7 +10,10 @@ relMSE at equal time.
 2. **Shift statistics** of the timed gpt passes (``Frame.stats`` counters ``shift_<action>_*``):
    per action, how often it ran per base path and the fraction that succeeded; ``fail`` counts
    vertex-class mismatches (including offsets that left the scene).
-3. **Equal time** (``gdlearn.experiments.equal_time``): pt, gpt-replay and gpt per policy, the
+3. **Gradient error at equal samples** (the STAR's Fig. 5 comparison): relMSE of gx, gy against
+   the finite differences of the reference, ``--grad-spp`` samples, mean over ``--seeds`` seeds;
+   replay is ``gpt-replay``; baseline: finite differences of pt's image at the same spp. relMSE = mean over pixels of (g - g_ref)^2 / (g_ref^2 + 1e-2).
+4. **Equal time** (``gdlearn.experiments.equal_time``): pt, gpt-replay and gpt per policy, the
    gradient methods reconstructed with each ``--solvers``, ``--seconds`` per run (JIT excluded,
    final reconstruction included) on ``--seeds`` seeds, against a ``--ref-spp`` path-traced
    reference with an independent seed (cached on disk). ``pt/method`` > 1 means the method wins.
@@ -26,7 +29,7 @@ import numpy as np
 from gdlearn.experiments import SceneFile, equal_time
 from gdlearn.experiments.references import render_reference
 from gdlearn.experiments.study import Method
-from gdlearn.integrators import make
+from gdlearn.integrators import make, render
 from gdlearn.integrators.gpt import SUPPORTED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -80,14 +83,52 @@ def print_costs(files, a):
             print(f"{name:13s} {p:26s} " + " ".join(f"{c:>20s}" for c in cells))
 
 
-def print_equal_time(files, a):
-    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.seeds} seeds, reference pt {a.ref_spp} spp")
+def _finite_differences(img):
+    gx, gy = np.zeros_like(img), np.zeros_like(img)
+    gx[:, :-1] = img[:, 1:] - img[:, :-1]
+    gy[:-1] = img[1:] - img[:-1]
+    return gx, gy
+
+
+def _grad_relmse(frame, ref):
+    err = []
+    for g, r in ((frame.gx[:, :-1], ref[:, 1:] - ref[:, :-1]), (frame.gy[:-1], ref[1:] - ref[:-1])):
+        err.append(((g - r) ** 2 / (r ** 2 + 1e-2)).mean())
+    return float(np.mean(err))
+
+
+def print_gradient_error(files, refs, a):
+    print(f"\n## gradient relMSE at equal samples ({a.grad_spp} spp, mean of {a.seeds} seeds)")
+    for name, sf in files.items():
+        scene = sf.load()
+        runs = [("replay (gpt-replay)", "gpt-replay", {})] + [(p, "gpt", {"shift": p}) for p in POLICIES]
+        cells = []
+        # baseline: finite differences of a path-traced image of the same samples (no shift at all)
+        e = []
+        for s in range(a.seeds):
+            f = render(make("pt", scene, seed=100 + s, spp_per_pass=a.grad_spp, threads=a.threads), spp=a.grad_spp)
+            f.images["gx"], f.images["gy"] = _finite_differences(f.primal)
+            e.append(_grad_relmse(f, refs[name].image))
+        cells.append(f"pt finite differences {np.mean(e):.3e}")
+        for label, est, opts in runs:
+            e = [_grad_relmse(render(make(est, scene, seed=100 + s, spp_per_pass=a.grad_spp, threads=a.threads,
+                                          **opts), spp=a.grad_spp), refs[name].image) for s in range(a.seeds)]
+            cells.append(f"{label} {np.mean(e):.3e}")
+        print(f"{name:13s} " + "  ".join(cells))
+
+
+def references(files, a):
     refs = {}
     for name, sf in files.items():
         t0 = time.perf_counter()
         refs[name] = render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64)
         print(f"reference {name}: {time.perf_counter() - t0:.1f} s (cached after the first run), "
               f"noise floor {refs[name].floor:.2e}")
+    return refs
+
+
+def print_equal_time(files, refs, a):
+    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.seeds} seeds, reference pt {a.ref_spp} spp")
     methods = [Method.parse("pt")] + [Method.parse(f"gpt-replay+{s}") for s in a.solvers]
     for p in POLICIES:
         methods += [Method(f"gpt[{p}]+{s}", "gpt", s, (("shift", p),)) for s in a.solvers]
@@ -113,6 +154,7 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0, help="equal-time budget per run")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--ref-spp", type=int, default=4096)
+    ap.add_argument("--grad-spp", type=int, default=16)
     ap.add_argument("--solvers", nargs="+", default=["l1", "l2"])
     ap.add_argument("--equal-time-scenes", nargs="+", default=["cornell-box"])
     ap.add_argument("--no-equal-time", action="store_true")
@@ -122,8 +164,10 @@ def main():
           f"on {os.cpu_count()} cores, threads {a.threads or 'all'}")
     files = {n: SceneFile(os.path.join(ROOT, "scenes", f"{n}.xml"), (("res", a.res),)) for n in a.scenes}
     print_costs(files, a)
+    refs = references(files, a)
+    print_gradient_error(files, refs, a)
     if not a.no_equal_time:
-        print_equal_time({n: files[n] for n in a.equal_time_scenes if n in files}, a)
+        print_equal_time({n: files[n] for n in a.equal_time_scenes if n in files}, refs, a)
 
 
 if __name__ == "__main__":
