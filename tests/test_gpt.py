@@ -120,7 +120,6 @@ def _pilot(name):
 @pytest.mark.parametrize("name,shift,effects", [("cornell-box", "halfvector+reconnection", None),
                                                 ("caustics-box", "halfvector+reconnection", None),
                                                 ("caustics-box", "replay+reconnection", None),
-                                                ("cornell-box", "replay+reconnection", None),
                                                 ("caustics-box", "replay", None),
                                                 ("near-specular", "halfvector+reconnection", None),
                                                 ("near-specular", "replay+reconnection", None),

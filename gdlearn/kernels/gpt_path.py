@@ -242,6 +242,50 @@ def _roulette(of, oi, beta, eta, u):
 
 
 @njit(cache=True, error_model="numpy")
+def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, of, oi, diff, mask, threshold,
+                broken, stack):
+    """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers) and its
+    shifts (:func:`_nee_pairs`); returns the base contribution."""
+    n_em = sa.emitters.shape[0]
+    u_sel = rand(seed, key, s, dim(depth, D_EM_SEL))
+    em_b, q, nq, _, _, _, _, _, _ = sample_emitter(
+        sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel,
+        rand(seed, key, s, dim(depth, D_EM_U1)), rand(seed, key, s, dim(depth, D_EM_U2)))
+    # the chosen emitter even when the sample is black for the base (back side): an offset may
+    # still see the light point's front
+    em = min(int(u_sel * n_em), n_em - 1)
+    nb = (0.0, 0.0, 0.0)
+    if em_b >= 0:
+        nb = nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack)
+    cb = (0.0, 0.0, 0.0)
+    if _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
+        cb = mul3(beta, nb)
+    _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack)
+    return cb
+
+
+@njit(cache=True, error_model="numpy")
+def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, us, hit2, prim2, p2, ng2, ns2,
+                   d2, threshold, broken, stats, stack):
+    """Extend every live offset by the segment the base just sampled (p -> p2 along d2)."""
+    for k in range(4):
+        if oi[k, I_ALIVE] != ALIVE:
+            continue
+        if oi[k, I_RECONN] != FREE:
+            _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
+            if oi[k, I_ALIVE] == ALIVE:
+                _set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
+        else:
+            _shift_segment(sa, k, of, oi, policy, cls_b, cls_next_of(sa, hit2, prim2, threshold), p, wi, wo, pdf,
+                           delta, us, hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def cls_next_of(sa, hit2, prim2, threshold):
+    return vclass_of(sa, not hit2, prim2, threshold)
+
+
+@njit(cache=True, error_model="numpy")
 def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask, threshold,
                of, oi, diff, stats, stack, broken=0):
     """One base path through film point (fx, fy) of pixel (x, y) and its four shifts. Returns the
@@ -272,21 +316,9 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth
         wi_world = (-d[0], -d[1], -d[2])
         wi = to_local(wi_world, sf, tf, ns)
         if not bsdf_is_delta_only(mat) and n_em > 0:
-            u_sel = rand(seed, key, s, dim(depth, D_EM_SEL))
-            em_b, q, nq, _, _, _, _, _, _ = sample_emitter(
-                sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel,
-                rand(seed, key, s, dim(depth, D_EM_U1)), rand(seed, key, s, dim(depth, D_EM_U2)))
-            # the chosen emitter even when the sample is black for the base (back side): an
-            # offset may still see the light point's front
-            em = min(int(u_sel * n_em), n_em - 1)
-            nb = (0.0, 0.0, 0.0)
-            if em_b >= 0:
-                nb = nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack)
-            cb = (0.0, 0.0, 0.0)
-            if _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
-                cb = mul3(beta, nb)
+            cb = _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, of, oi, diff, mask,
+                             threshold, broken, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-            _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack)
         u_lobe = rand(seed, key, s, dim(depth, D_LOBE))
         u1 = rand(seed, key, s, dim(depth, D_BSDF_U1))
         u2 = rand(seed, key, s, dim(depth, D_BSDF_U2))
@@ -296,17 +328,8 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth
         cls_b = sampled_lobe_class(mat, wi, u_lobe, delta, threshold)
         d2 = to_world(wo, sf, tf, ns)
         hit2, _, prim2, p2, ng2, ns2, _ = intersect(sa, offset_origin(p, ng, d2), d2, 0.0, math.inf, stack)
-        cls_next = vclass_of(sa, not hit2, prim2, threshold)
-        for k in range(4):
-            if oi[k, I_ALIVE] != ALIVE:
-                continue
-            if oi[k, I_RECONN] != FREE:
-                _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
-                if oi[k, I_ALIVE] == ALIVE:
-                    _set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
-            else:
-                _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta, (u_lobe, u1, u2),
-                               hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
+        _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, (u_lobe, u1, u2), hit2, prim2,
+                       p2, ng2, ns2, d2, threshold, broken, stats, stack)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)
         prev_p, prev_pdf, prev_delta = p, pdf, delta
