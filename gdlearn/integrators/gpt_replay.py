@@ -13,7 +13,10 @@ pixels of five per-base-pixel buffers -- the primal and the mean (offset - base)
 (right, left, down, up). A backward shift of pixel (x+1, y) and the forward shift of (x, y) estimate
 the same gradient but belong to different base pixels (possibly different rows, for gy): keeping
 them apart and combining afterwards (:func:`gdlearn.shifts.replay.combine_gradients`) means no two
-threads ever add into one element. The base image is bit-identical to ``pt``'s with the same seed.
+threads ever add into one element. The base image is bit-identical to ``pt``'s with the same seed
+(tested) -- provided both kernels were compiled from the same sources: numba's on-disk cache only
+notices edits to a kernel's *own* file, so after an edit of a shared kernel module a stale cached
+``pt`` can differ from a freshly compiled ``gpt-replay`` in rare samples.
 
 Cost: a base path plus up to four offset paths per sample, about 5x a path-tracing sample
 (``benchmarks/bench_gpt_replay.py`` measures it). Stage timing ``trace`` covers base and offset
