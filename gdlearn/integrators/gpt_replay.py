@@ -36,6 +36,7 @@ from ..kernels.geometry import INFO_SHAPE
 from ..kernels.rng import rand
 from ..kernels.surface_path import radiance_path
 from ..kernels.volume_path import radiance_volpath
+from ..scene.compile import borrowed
 from ..shifts.replay import (DIM_SHIFT_RR, SHIFT_WEIGHTS, combine_gradients, neighbour_inside,
                              offset_film_position, shift_survival)
 from .base import PassResult
@@ -90,7 +91,7 @@ def _diagnose(sa, diag, y, x, base, off, fx, fy, ox, oy, stack):
         diag[y, x, DIAG_OTHER_SURFACE] += 1.0
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy")
 def replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
                      out, counts, diag, want_diag):
     """Algorithm 1's sampling loop on surfaces (Mitsuba ``path``).
@@ -101,6 +102,14 @@ def replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
     ``want_diag`` (see :func:`_diagnose`). A non-finite base drops the sample with its shifts, a
     non-finite offset drops that shift; both are counted.
     """
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed)
+    _replay_rows_path(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold,
+                     rr_min, out, counts, diag, want_diag)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
+                     out, counts, diag, want_diag):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
     for y in prange(h):
@@ -138,10 +147,18 @@ def replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
                     out[j, y, x, c] = acc[j, c] * inv
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy")
 def replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
-                        out, counts, diag, want_diag):
+                     out, counts, diag, want_diag):
     """As :func:`replay_rows_path` with media (Mitsuba ``volpath``)."""
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed)
+    _replay_rows_volpath(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold,
+                     rr_min, out, counts, diag, want_diag)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
+                     out, counts, diag, want_diag):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
     for y in prange(h):
