@@ -42,13 +42,7 @@ INFINITE_VARIANCE = {
 }
 #: Known, explained mismatches (strict xfail: the test turns red again once the cause is fixed, so
 #: the marker must then be removed). Found by this cross-check; see the reason for the evidence.
-KNOWN_MISMATCH = {
-    "spot-medium": "scene issue: the smoke cube's bottom face (y = -0.2 - 0.8 = -1) is coplanar with "
-                   "the floor (y = -1); gdlearn and Mitsuba break the tie differently, so the blocks "
-                   "at the cube's foot (rows 20-27, cols 8-23) are 0.6-0.8x Mitsuba (z down to -40), "
-                   "image mean -3 %. With the cube raised by 0.01 (translate y=-0.19) gdlearn matches "
-                   "Mitsuba (0/192 blocks beyond the bound, mean z^2 0.85).",
-}
+KNOWN_MISMATCH: dict[str, str] = {}   # e.g. spot-medium had a cube face coplanar with the floor (fixed)
 #: Family-wise false-alarm probability of one image comparison (Bonferroni inside compare()).
 ALPHA = 1e-3
 #: The image mean must agree to 3 % per channel: below the 5 % light change the harness must catch,
