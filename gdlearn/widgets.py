@@ -19,6 +19,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from .io.tonemap import tonemap
+
 #: Largest number of pictures one view may precompute (each is stored in the page).
 MAX_VIEWS = 64
 #: Pictures narrower than this (pixels) are enlarged by pixel replication so noise stays visible.
@@ -27,14 +29,9 @@ MIN_DISPLAY = 256
 
 # -- pictures -----------------------------------------------------------------------------------------
 def srgb(image, exposure: float = 0.0) -> np.ndarray:
-    """Linear RGB (H x W x 3 or H x W) -> 8-bit sRGB for display: scale by 2^exposure, clip to
-    [0, 1], apply the sRGB transfer curve (IEC 61966-2-1). NaN/Inf show as black, never crash."""
-    img = np.asarray(image, dtype=np.float64) * (2.0 ** exposure)
-    img = np.clip(np.nan_to_num(img, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    enc = np.where(img <= 0.0031308, 12.92 * img, 1.055 * img ** (1 / 2.4) - 0.055)
-    if enc.ndim == 2:
-        enc = np.repeat(enc[..., None], 3, axis=2)
-    return (enc * 255.0 + 0.5).astype(np.uint8)
+    """Linear RGB (H x W x 3 or H x W) -> 8-bit sRGB for display: :func:`gdlearn.io.tonemap.tonemap`
+    (scale by 2^exposure, clip to [0, 1], IEC 61966-2-1 curve; NaN/Inf show as black)."""
+    return tonemap(image, exposure)
 
 
 def _enlarge(rgb8: np.ndarray) -> np.ndarray:

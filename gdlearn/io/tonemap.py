@@ -23,6 +23,8 @@ def srgb_decode(v: np.ndarray) -> np.ndarray:
 
 
 def tonemap(img: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """H x W x 3 linear float -> H x W x 3 uint8 sRGB (exposure in stops)."""
+    """H x W x 3 (or H x W grey) linear float -> H x W x 3 uint8 sRGB (exposure in stops)."""
     a = np.nan_to_num(np.asarray(img, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
     return np.round(srgb_encode(a * 2.0 ** exposure) * 255.0).astype(np.uint8)
