@@ -28,6 +28,7 @@ from ..kernels.bvh import STACK_SIZE
 from ..kernels.gpt_path import gpt_sample
 from ..kernels.gpt_shift import NF, NI
 from ..kernels.rng import rand
+from ..scene.compile import borrowed
 from ..shifts.policy import N_STATS, POLICIES, policy_code, stats_dict
 from ..shifts.replay import combine_gradients
 from .base import PassResult
@@ -38,10 +39,17 @@ SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection")
 DEFAULT_POLICY = "halfvector+reconnection"
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy")
 def gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad):
     """``out`` (5, H, W, 3): [0] primal mean, [1 + k] mean gradient sample of shift k per base pixel.
     ``stats`` (H, N_STATS) shift counters per row, ``bad`` (H,) dropped non-finite samples."""
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed, as pt)
+    _gpt_rows(borrowed(sa), seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats,
+              bad)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
     for y in prange(h):
