@@ -51,6 +51,16 @@ def test_effects_and_threads_options(tmp_path):
     assert r.returncode == 2 and "nonsense" in r.stderr
 
 
+def test_shift_option_is_checked_before_rendering(tmp_path):
+    # --shift belongs to gpt; a wrong integrator or an unknown policy stops with exit 2 and says why.
+    r = _cli(SCENE, "--spp", "1", "--set", "res=8", "--shift", "replay", "--out", str(tmp_path / "s.npy"))
+    assert r.returncode == 2 and "--integrator gpt" in r.stderr
+    r = _cli(SCENE, "--integrator", "gpt", "--spp", "1", "--set", "res=8", "--shift", "teleport",
+             "--out", str(tmp_path / "t.npy"))
+    assert r.returncode == 2 and "teleport" in r.stderr and "halfvector+reconnection" in r.stderr
+    assert not (tmp_path / "s.npy").exists() and not (tmp_path / "t.npy").exists()
+
+
 @pytest.mark.skipif(os.name != "posix", reason="SIGINT delivery to a child process")
 def test_ctrl_c_saves_what_was_accumulated(tmp_path):
     out = tmp_path / "int.npy"

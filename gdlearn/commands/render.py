@@ -33,6 +33,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--recon", default="none", choices=("none", "cv", "cv-weighted", "l2", "l1"),
                    help="gradient integrators: write the image reconstructed by this solver to --out "
                         "(default none: the primal image)")
+    p.add_argument("--shift", default=None, metavar="POLICY",
+                   help="gpt only: shift-mapping policy (replay, replay+reconnection, "
+                        "halfvector+reconnection; default: the integrator's best)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -67,6 +70,11 @@ def run(args) -> int:
         opts["effects"] = args.effects
     if args.threads is not None:
         opts["threads"] = args.threads
+    if args.shift is not None:
+        if args.integrator != "gpt":
+            print(f"gdlearn render: --shift applies to --integrator gpt, not {args.integrator}", file=sys.stderr)
+            return 2
+        opts["shift"] = args.shift
     try:
         integ = make(args.integrator, scene, **opts)
     except EffectsError as err:
