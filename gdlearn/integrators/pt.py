@@ -3,7 +3,9 @@
 One pass renders ``spp_per_pass`` samples in every pixel. Rows are distributed over the threads
 with ``prange`` (dynamic chunks, so the costlier rows of a scene do not idle a core); every row
 writes only its own pixels, and every random number is ``rand(seed, pixel key, sample index, dim)``
--- so the image is the same for 1 and 2 threads and for any pass split.
+-- so the image is the same for 1 and 2 threads and for any pass split. The threads share the scene
+as *borrowed* arrays (:func:`gdlearn.scene.compile.borrowed`): with the owned arrays every kernel call
+updated the same atomic reference counts from both cores, and 2 threads were barely faster than 1.
 
 The per-path kernels live in :mod:`gdlearn.kernels.surface_path` (``path``: surfaces only) and
 :mod:`gdlearn.kernels.volume_path` (``volpath``: homogeneous media, null interfaces, camera medium).
