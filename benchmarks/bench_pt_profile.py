@@ -4,12 +4,15 @@ closest-hit traversal alone over the same camera rays.
 
     .venv/bin/python benchmarks/bench_pt_profile.py [--scene cornell-box] [--res 256] [--spp 8]
 
-Every kernel is warmed (JIT compiled) before it is timed; each figure is the best of ``--repeat``
-runs (the machine is shared, the best run is the least disturbed one).
+Every kernel is warmed (JIT compiled) before it is timed; the cases are then timed round-robin
+``--repeat`` times and each figure is the best run (the machine is shared: the best run is the least
+disturbed one). "per CPU s" divides by the CPU time of all this process's threads: on a loaded
+machine it shows the work done, "per wall s" what a user waits.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -43,15 +46,11 @@ def _camera_hits(sb, h, w, spp, out):
         out[y] = n
 
 
-def best(f, repeat):
-    """(best wall seconds, CPU seconds of that run): on a shared machine the CPU time (all threads
-    of this process) is the steadier measure of work done; wall time is what a user waits."""
-    ts = []
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
+def _with_threads(threads, f):
+    def run():
+        numba.set_num_threads(threads)
         f()
-        ts.append((time.perf_counter() - t0, time.process_time() - c0))
-    return min(ts)
+    return run
 
 
 def main(argv=None):
@@ -63,32 +62,39 @@ def main(argv=None):
     p.add_argument("--repeat", type=int, default=3)
     a = p.parse_args(argv)
     scene = load(ROOT / "scenes" / f"{a.scene}.xml", res=a.res, max_depth=a.max_depth)
-    print(f"numba threading layer: {numba.config.THREADING_LAYER} (active after first parallel call)")
     n = a.res * a.res * a.spp
-    rows = []
+    cases = []        # (label, unit, callable): all warmed first, then timed round-robin
     for threads in (1, 2):
         integ = make("pt", scene, seed=0, spp_per_pass=a.spp, threads=threads)
         integ.compile()
-        dt, cpu = best(lambda: integ.render_pass(0), a.repeat)
-        rows.append((f"pt, {threads} thread(s)", n / dt / 1e6, n / cpu / 1e6, "M samples/s"))
+        cases.append((f"pt, {threads} thread(s)", "M samples/s", lambda integ=integ: integ.render_pass(0)))
         if not integ.media:   # the same kernel on the owned (reference-counted) arrays, for comparison
             img, bad = np.zeros((a.res, a.res, 3)), np.zeros(a.res, dtype=np.int64)
-            numba.set_num_threads(threads)
-            dt, cpu = best(lambda: _rows_path(integ.sa, 0, 0, a.spp, integ.max_depth, integ.rr_depth, integ.mask,
-                                              integ.threshold, img, bad), a.repeat)
-            rows.append((f"pt, sa not borrowed, {threads} thread(s)", n / dt / 1e6, n / cpu / 1e6, "M samples/s"))
-        sa = integ.sa
-        out = np.zeros(a.res, dtype=np.int64)
-        numba.set_num_threads(threads)
+            f = (lambda integ=integ, img=img, bad=bad: _rows_path(
+                integ.sa, 0, 0, a.spp, integ.max_depth, integ.rr_depth, integ.mask, integ.threshold, img, bad))
+            cases.append((f"pt, sa not borrowed, {threads} thread(s)", "M samples/s", _with_threads(threads, f)))
+        sa, out = integ.sa, np.zeros(a.res, dtype=np.int64)
         for b in (False, True):
-            _camera_hits(borrowed(sa) if b else sa, a.res, a.res, a.spp, out)
-            dt, cpu = best(lambda: _camera_hits(borrowed(sa) if b else sa, a.res, a.res, a.spp, out), a.repeat)
-            rows.append((f"closest_hit camera rays{' (borrowed sa)' if b else ''}, {threads} thread(s)",
-                         n / dt / 1e6, n / cpu / 1e6, "M rays/s"))
-    print(f"active threading layer: {numba.threading_layer()}")
+            f = (lambda sb=(borrowed(sa) if b else sa): _camera_hits(sb, a.res, a.res, a.spp, out))
+            cases.append((f"closest_hit camera rays{' (borrowed sa)' if b else ''}, {threads} thread(s)",
+                          "M rays/s", _with_threads(threads, f)))
+    for _, _, f in cases:
+        f()                                        # warm: JIT compile, caches, thread pool
+    # round-robin repeats: a burst of load from other processes then hits every case alike; the best
+    # wall time and the best CPU time (all threads of this process) of each case are kept
+    wall = [float("inf")] * len(cases)
+    cpu = [float("inf")] * len(cases)
+    for _ in range(a.repeat):
+        for k, (_, _, f) in enumerate(cases):
+            t0, c0 = time.perf_counter(), time.process_time()
+            f()
+            wall[k] = min(wall[k], time.perf_counter() - t0)
+            cpu[k] = min(cpu[k], time.process_time() - c0)
+    print(f"# {a.scene} {a.res}x{a.res}, {a.spp} spp, max_depth {a.max_depth}; numba threading layer "
+          f"{numba.threading_layer()}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(f"{'':50s} {'per wall s':>10s} {'per CPU s':>10s}")
-    for name, v, c, unit in rows:
-        print(f"{name:50s} {v:10.3f} {c:10.3f} {unit}")
+    for (name, unit, _), w, c in zip(cases, wall, cpu):
+        print(f"{name:50s} {n / w / 1e6:10.3f} {n / c / 1e6:10.3f} {unit}")
 
 
 if __name__ == "__main__":
