@@ -73,7 +73,8 @@ def borrowed(sa):
 
     Call it once at the top of a parallel kernel and pass the result down: the arrays are shared by
     all threads, and their atomic reference counts were the path tracer's scaling bottleneck. Only
-    valid while ``sa`` itself is alive (for the duration of that kernel call)."""
+    valid while ``sa`` itself is alive (for the duration of that kernel call); call it from compiled
+    code only, never from Python (the returned arrays would not keep their memory alive)."""
     return SceneArrays(borrow(sa.prims), borrow(sa.prim_info), borrow(sa.prim_area), borrow(sa.nodes),
                        borrow(sa.node_info), borrow(sa.materials), borrow(sa.media), borrow(sa.emitters),
                        borrow(sa.em_prims), borrow(sa.em_cdf), borrow(sa.camera), borrow(sa.bsphere),
