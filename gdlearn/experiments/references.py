@@ -7,7 +7,8 @@ using BRE with a ..."). gdlearn does the same, and keeps the reference's own noi
 * :func:`render_reference` -- a long run of a gdlearn estimator (default ``pt``), cached in
   ``$GDLEARN_CACHE/references`` (default ``~/.cache/gdlearn/references``) under a key made of the
   scene's *content* (the file and every file it references), the estimator, spp, seed, options and
-  gdlearn's version: editing the scene or upgrading gdlearn never reuses a stale image.
+  gdlearn's source (:func:`gdlearn.source_hash`): editing the scene or any of gdlearn's code never
+  reuses a stale image.
 * :func:`mitsuba_reference` -- Mitsuba 3 renders over several seeds (via
   :func:`gdlearn.refs.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
 * :func:`load_reference` -- an image file (``.npz`` from this cache, ``.npy``, ``.exr``).
@@ -91,10 +92,10 @@ def scene_digest(scene) -> str:
 
 
 def cache_key(scene, estimator, spp: int, seed: int, **options) -> str:
-    from gdlearn import __version__
+    from gdlearn import __version__, source_hash
     parts = {"scene": scene_digest(scene), "estimator": str(estimator), "spp": int(spp),
              "seed": int(seed), "options": sorted((k, repr(v)) for k, v in options.items()),
-             "version": __version__, "format": CACHE_FORMAT}
+             "version": __version__, "source": source_hash(), "format": CACHE_FORMAT}
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:20]
 
 
