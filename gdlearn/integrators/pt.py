@@ -40,6 +40,9 @@ def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
     _rows_path(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad)
 
 
+# The surface and volume row loops below are twins on purpose: passing the radiance function as an
+# argument would merge them, but numba never caches a kernel that takes a dispatcher argument
+# (measured: every process recompiles it, ~40 s), and this loop is the hot, cached entry point.
 @njit(cache=True, error_model="numpy", parallel=True)
 def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     h, w = out.shape[0], out.shape[1]
