@@ -114,6 +114,12 @@ def build_bsdf(ld, node) -> BSDF:
         if len(inner) != 1 or inner[0].twosided:
             raise SceneError(ld.path, node.line, "<bsdf type=\"twosided\"> must wrap exactly one "
                              "one-sided BSDF", "put one <bsdf> (or <ref>) inside it")
+        if inner[0].type in ("dielectric", "roughdielectric", "null"):
+            # Mitsuba's twosided plugin refuses transmissive BSDFs (the back side is the inside)
+            raise SceneError(ld.path, node.line, f'<bsdf type="twosided"> cannot wrap a '
+                             f'transmissive "{inner[0].type}" BSDF (Mitsuba 3 refuses it too)',
+                             f'remove the twosided wrapper: a "{inner[0].type}" BSDF is already seen '
+                             'from both sides')
         props.finish(())
         b = BSDF(**{k: getattr(inner[0], k) for k in inner[0].__dataclass_fields__})
         b.twosided, b.id, b.src = True, node.attrs.get("id"), _src(ld, node)
