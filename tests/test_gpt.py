@@ -72,7 +72,8 @@ def _blocks(a):
 
 
 def differences(frames):
-    p = np.stack([f.primal for f in frames])
+    # the base radiance L (pt's estimator), not the MIS primal: the gradients are tested on their own
+    p = np.stack([f.images["primal_base"] for f in frames])
     gx = np.stack([f.gx for f in frames])
     gy = np.stack([f.gy for f in frames])
     return gx[:, :, :-1] - (p[:, :, 1:] - p[:, :, :-1]), gy[:, :-1, :] - (p[:, 1:, :] - p[:, :-1, :])
@@ -176,7 +177,7 @@ def test_primal_is_the_path_tracer_without_roulette():
     g = make("gpt", sc, seed=3, spp_per_pass=2)
     p = make("pt", sc, seed=3, spp_per_pass=2)
     g.rr_depth = p.rr_depth = 1 << 20
-    a, b = render(g, spp=4).primal, render(p, spp=4).primal
+    a, b = render(g, spp=4).images["primal_base"], render(p, spp=4).primal
     assert b.mean() > 0
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)   # only the order of products differs
 
@@ -186,7 +187,7 @@ def test_stats_and_hard_cases_stay_finite():
     non-finite, each shift kind ran, failures counted, borders undefined (zero)."""
     sc = _scene("caustics-box")
     f = render(make("gpt", sc, seed=11, spp_per_pass=4, max_depth=12), spp=8)
-    for name in ("primal", "gx", "gy"):
+    for name in ("primal", "primal_base", "gx", "gy"):
         assert np.all(np.isfinite(f.images[name]))
     assert f.stats["nonfinite_samples"] == 0
     for action in ("halfvector", "reconnection"):

@@ -8,6 +8,11 @@ base pixel a primal buffer and four shift buffers (right, left, down, up), writt
 combined afterwards into gx, gy -- with weights (1, 1) here, since the MIS weights are inside the
 buffers (forward and backward weights of one path pair sum to one).
 
+The primal image is Kettunen et al.'s MIS-weighted one (:func:`mis_primal`): each path pair also
+estimates the pixel value twice, from the base path in p and from the offset path shifted back from
+the neighbour, with the same Eq. 17 weights. ``images["primal"]`` is that estimate;
+``images["primal_base"]`` is the base radiance alone (``pt``'s estimator, same random numbers).
+
 Policies shipped: ``replay+reconnection`` and ``halfvector+reconnection`` (the default, Kettunen et
 al.'s and the STAR Fig. 5's best), plus ``replay`` (the same as ``gpt-replay`` with MIS weights,
 which reduce to 1/2 for replay). Manifold exploration and media are not supported by this
@@ -30,7 +35,7 @@ from ..kernels.gpt_shift import NF, NI
 from ..kernels.rng import rand
 from ..scene.compile import borrowed
 from ..shifts.policy import N_STATS, POLICIES, policy_code, stats_dict
-from ..shifts.replay import combine_gradients
+from ..shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
 from .base import PassResult
 from .pt import PathTracer
 
@@ -41,8 +46,12 @@ DEFAULT_POLICY = "halfvector+reconnection"
 
 @njit(cache=True, error_model="numpy")
 def gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad):
-    """``out`` (5, H, W, 3): [0] primal mean, [1 + k] mean gradient sample of shift k per base pixel.
-    ``stats`` (H, N_STATS) shift counters per row, ``bad`` (H,) dropped non-finite samples."""
+    """Per-pass means per base pixel in ``out`` (9, H, W, 3): [0] L, the base radiance (pt's primal
+    sample); [1 + k] D_k, the gradient sample of shift k (right, left, down, up), sum over techniques
+    of w (C' - C), -C for a failed shift; [5 + k] S_k, the weighted offset contribution sum w C' (0 for
+    failed or outside shifts). ``stats`` (H, N_STATS) shift counters per row, ``bad`` (H,) dropped
+    non-finite samples (the whole sample is dropped). ``gpt_volume.gpt_volume_rows`` has the same
+    signature and contract."""
     # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed, as pt)
     _gpt_rows(borrowed(sa), seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats,
               bad)
@@ -56,8 +65,8 @@ def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, thresho
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         of = np.zeros((4, NF))
         oi = np.zeros((4, NI), dtype=np.int64)
-        diff = np.zeros((4, 3))
-        acc = np.zeros((5, 3))
+        diff = np.zeros((8, 3))
+        acc = np.zeros((9, 3))
         st = stats[y]
         for x in range(w):
             key = y * w + x
@@ -71,11 +80,38 @@ def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, thresho
                     continue
                 for ch in range(3):
                     acc[0, ch] += c[ch]
-                    for k in range(4):
+                    for k in range(8):
                         acc[1 + k, ch] += diff[k, ch]
-            for j in range(5):
+            for j in range(9):
                 for ch in range(3):
                     out[j, y, x, ch] = acc[j, ch] * inv
+
+
+def mis_primal(out: np.ndarray) -> np.ndarray:
+    """Kettunen et al. 2015's primal image (Sec. 4 of their paper; STAR Sec. 3.5, Eq. 16-17): every
+    pair of neighbours (p, q = p + dir_k) has two techniques for I_p, "sample in p" and "sample in q,
+    shift back to p", combined by the balance weights of Eq. 17 that the kernel already applied. With
+    the kernel's buffers ``out`` (9, H, W, 3) (:func:`gpt_rows`: L, D_k, S_k) pair k estimates
+
+        I_p ~ (S_k - D_k)[p] + S_opp(k)[p + dir_k]      (= w C of p's paths + w' C' of q's offsets)
+
+    where S_k - D_k is w C for a shift that succeeded and C (weight 1) for one that failed. A pair whose
+    neighbour lies outside the image has only the first technique with weight 1: L[p]. Each pair is
+    unbiased for I_p; the result is their mean (1/4 each)."""
+    out = np.asarray(out, dtype=np.float64)
+    base = out[0]
+    h, w = base.shape[:2]
+    acc = np.zeros_like(base)
+    for k in range(4):
+        dx, dy = int(SHIFT_DX[k]), int(SHIFT_DY[k])
+        term = base.copy()
+        y0, y1 = max(0, -dy), h - max(0, dy)     # pixels p whose neighbour p + dir_k is inside
+        x0, x1 = max(0, -dx), w - max(0, dx)
+        own = out[5 + k, y0:y1, x0:x1] - out[1 + k, y0:y1, x0:x1]
+        back = out[5 + (k ^ 1), y0 + dy:y1 + dy, x0 + dx:x1 + dx]   # k ^ 1: right <-> left, down <-> up
+        term[y0:y1, x0:x1] = own + back
+        acc += term
+    return 0.25 * acc
 
 
 class GradientPathTracer(PathTracer):
@@ -101,7 +137,7 @@ class GradientPathTracer(PathTracer):
 
     def trace(self, sample0: int, spp: int):
         h, w = self.height, self.width
-        out = np.zeros((5, h, w, 3))
+        out = np.zeros((9, h, w, 3))
         stats = np.zeros((h, N_STATS), dtype=np.int64)
         bad = np.zeros(h, dtype=np.int64)
         old = numba.get_num_threads()
@@ -130,7 +166,8 @@ class GradientPathTracer(PathTracer):
         out, st, nbad = self.trace(pass_index * self.spp_per_pass, self.spp_per_pass)
         t1 = time.perf_counter()
         # MIS weights are already inside the buffers: forward and backward are summed (Eq. 16)
-        gx, gy = combine_gradients(out[1:], (1.0, 1.0))
+        gx, gy = combine_gradients(out[1:5], (1.0, 1.0))
+        primal = mis_primal(out)
         t2 = time.perf_counter()
         stats = {"paths": self.width * self.height * self.spp_per_pass, "nonfinite_samples": nbad}
         for action, c in stats_dict(st).items():
@@ -138,5 +175,5 @@ class GradientPathTracer(PathTracer):
                 continue
             for outcome, v in c.items():
                 stats[f"shift_{action}_{outcome}"] = v
-        return PassResult(images={"primal": out[0], "gx": gx, "gy": gy}, spp=self.spp_per_pass,
+        return PassResult(images={"primal": primal, "primal_base": out[0], "gx": gx, "gy": gy}, spp=self.spp_per_pass,
                           timings={"trace": t1 - t0, "combine": t2 - t1}, stats=stats)

@@ -37,7 +37,7 @@ from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lob
                                   sampled_lobe_class, vertex_class)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.gpt_shift import (BROKEN_MIS, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+from gdlearn.kernels.gpt_shift import (BROKEN_MIS, BROKEN_PRIMAL, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                        I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                        I_STATE, JOINED, MERGED, FREE, conn, decide, emitted, get3,
                                        mul3, nee_at, sc3, set3, shift_direction, vclass_of, _update)
@@ -97,11 +97,14 @@ def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _pair(diff, of, oi, k, co, cb, broken):
-    """Eq. 16 with Eq. 17's weight for one technique: w (C' - C), or -C for a failed shift."""
+    """Eq. 16 with Eq. 17's weight for one technique: ``diff[k] += w (C' - C)`` (-C for a failed
+    shift), and the weighted offset contribution ``diff[4 + k] += w C'`` (0 for a failed shift) that
+    the MIS primal of Kettunen et al. 2015 gives to the neighbour (:func:`gdlearn.integrators.gpt.mis_primal`)."""
     if oi[k, I_ALIVE] == ALIVE:
         wgt = 1.0 if broken == BROKEN_MIS else mis_weight_from_log_ratio(of[k, F_LR])
         for c in range(3):
             diff[k, c] += wgt * (co[c] - cb[c])
+            diff[4 + k, c] += (1.0 if broken == BROKEN_PRIMAL else wgt) * co[c]
     elif oi[k, I_ALIVE] == FAILED:
         for c in range(3):
             diff[k, c] -= cb[c]
@@ -289,8 +292,9 @@ def cls_next_of(sa, hit2, prim2, threshold):
 def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask, threshold,
                of, oi, diff, stats, stack, broken=0):
     """One base path through film point (fx, fy) of pixel (x, y) and its four shifts. Returns the
-    base radiance (the primal sample); ``diff[k]`` receives the gradient sample of shift k (right,
-    left, down, up), zero for a shift outside the image."""
+    base radiance (the primal sample); ``diff`` (8, 3): ``diff[k]`` receives the gradient sample of
+    shift k (right, left, down, up), zero for a shift outside the image, and ``diff[4 + k]`` the
+    MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`)."""
     diff[:] = 0.0
     o, d, tmax = camera_ray(sa.camera, fx, fy)
     hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)

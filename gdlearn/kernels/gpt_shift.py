@@ -34,8 +34,9 @@ from gdlearn.shifts.reconnection import connectable, reconnect
 
 ZERO3 = (0.0, 0.0, 0.0)
 #: deliberately broken variants, for tests that must be able to fail: Eq. 17 weight 1 on both sides;
-#: the reconnection's solid-angle Jacobian replaced by 1; the half-vector copy's J_w replaced by 1
-BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN = 0, 1, 2, 3
+#: the reconnection's solid-angle Jacobian replaced by 1; the half-vector copy's J_w replaced by 1;
+#: the offset's share of the MIS primal left unweighted (S_k = sum C' instead of sum w C')
+BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN, BROKEN_PRIMAL = 0, 1, 2, 3, 4
 #: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
 ESCAPED = -1
 
