@@ -107,11 +107,12 @@ def test_manifold_offset_is_a_caustic_path_to_the_same_light_point():
                                     "halfvector+reconnection+manifold"])
 def test_zero_shift_never_fails_and_rates_are_fractions(policy):
     films = np.arange(0.5, 64, 8.0)
-    rates, counts = S.failure_rates(GLASS, policy, films, (0.0, 2.0), 3, 2)
+    rates, counts, reasons = S.failure_rates(GLASS, policy, films, (0.0, 2.0), 3, 2)
     assert rates.shape == (2, len(films))
     assert np.all(rates[0] == 0.0), "an offset identical to its base path must never fail"
     assert np.all((rates >= 0) & (rates <= 1 + 1e-12))
     assert sum(c[0] for c in counts.values()) > 0
+    assert sum(reasons.values()) == round(rates[1].sum() * 3)      # every failure has its reason
 
 
 def test_jacobian_table_agrees_and_has_power():

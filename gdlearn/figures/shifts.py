@@ -334,11 +334,13 @@ def failure_rates(sc: Section, policy: str, films, deltas, n_u: int, seed: int):
     """Fraction of failed shifts for each (delta, film) cell over ``n_u`` base paths (random numbers
     from ``numpy.random.default_rng(seed)``), and the count of each action that ran.
 
-    Returns ``(rates[len(deltas), len(films)], counts)`` with counts {action: (ran, failed)}."""
+    Returns ``(rates[len(deltas), len(films)], counts, reasons)``: counts {action: (ran, failed)},
+    reasons {why a shift failed: how often}."""
     rng = np.random.default_rng(seed)
     us = rng.random((len(films), n_u, 4))
     rates = np.zeros((len(deltas), len(films)))
     counts = {name: [0, 0] for name in P.ACTION_NAMES}
+    reasons = {}
     for i, f in enumerate(films):
         bases = [trace_base(sc, f, us[i, k]) for k in range(n_u)]
         for r, delta in enumerate(deltas):
@@ -349,9 +351,11 @@ def failure_rates(sc: Section, policy: str, films, deltas, n_u: int, seed: int):
                 rates[r, i] += (not res.ok) / n_u
                 for a in res.actions:
                     counts[a][0] += 1
-                if not res.ok and res.actions:
-                    counts[res.actions[-1]][1] += 1
-    return rates, {k: tuple(v) for k, v in counts.items()}
+                if not res.ok:
+                    reasons[res.reason] = reasons.get(res.reason, 0) + 1
+                    if res.actions:
+                        counts[res.actions[-1]][1] += 1
+    return rates, {k: tuple(v) for k, v in counts.items()}, reasons
 
 
 __all__ = ["Section", "Vertex", "CEILING", "ESCAPED", "ShiftResult", "camera_direction", "cast", "trace_base", "caustic_base",

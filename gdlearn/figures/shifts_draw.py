@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gdlearn.figures.shifts import SPHERE, Section
+from gdlearn.figures.shifts import LIGHT, SPHERE, Section
 
 BASE_STYLE = dict(color="black", lw=1.4, marker="o", ms=3.5, zorder=3)
 OFFSET_STYLE = dict(color="tab:orange", lw=1.4, ls="--", marker="o", ms=3.5, zorder=4)
@@ -44,6 +44,10 @@ def draw_shift(ax, sc: Section, base, result, title: str, **limits):
         last = result.offset[-1].pos
         ax.plot(last[0], last[2], marker="x", color="red", ms=10, mew=2.5, zorder=5,
                 label=f"failed: {result.reason}")
+    elif base[-1].surface == LIGHT and result.offset[-1].surface != LIGHT:
+        last = result.offset[-1].pos
+        ax.plot(last[0], last[2], marker="o", mfc="none", color="red", ms=11, mew=1.5, zorder=5,
+                label="offset misses the light: contributes 0")
     actions = " > ".join(result.actions) or "-"
     ax.set_title(f"{title}\n{actions}", fontsize=8.5)
     ax.legend(fontsize=7, loc="upper left", frameon=False)
