@@ -18,14 +18,21 @@ from numba import njit
 PARALLEL_MIN_SIZE = 1 << 18
 
 
-def kernel(fn):
-    """Decorator: ``fn(*arrays)`` dispatches on the size of its first argument."""
-    par = njit(cache=True, parallel=True)(fn)
+def kernel(fn=None, *, fastmath=False):
+    """Decorator: ``fn(*arrays)`` dispatches on the size of its first argument.
+
+    ``@kernel(fastmath=True)`` lets LLVM reassociate float sums, so loops with a reduction
+    (inner products) vectorise; only for kernels whose inputs are finite by construction and whose
+    results may differ from a sequential sum by round-off.
+    """
+    if fn is None:
+        return functools.partial(kernel, fastmath=fastmath)
+    par = njit(cache=True, parallel=True, fastmath=fastmath)(fn)
     twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial",
                               fn.__defaults__, fn.__closure__)
     twin.__qualname__ = fn.__qualname__ + "_serial"
     twin.__module__ = fn.__module__
-    ser = njit(cache=True)(twin)
+    ser = njit(cache=True, fastmath=fastmath)(twin)
 
     @functools.wraps(fn)
     def call(*args):
