@@ -50,7 +50,7 @@ def draw_shift(ax, sc: Section, base, result, title: str, **limits):
                 label="offset misses the light: contributes 0")
     actions = " > ".join(result.actions) or "-"
     ax.set_title(f"{title}\n{actions}", fontsize=8.5)
-    ax.legend(fontsize=7, loc="upper left", frameon=False)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.16, 0.99), frameon=False)   # right of the camera
 
 
 def draw_rates(ax, rates, films, deltas, title: str, fig=None):
