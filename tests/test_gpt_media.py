@@ -170,8 +170,8 @@ def test_base_radiance_is_pt_bit_for_bit_without_roulette():
 
 
 def test_stats_and_sum_buffers():
-    """Every shift kind that can run on the fog box ran; S_k - D_k is the weighted base term, so
-    where a shift left the image both are 0; counters add up."""
+    """Every shift kind that can run on the fog box ran; the counters add up; S_k - D_k is a sum of
+    non-negative base terms; where a shift leaves the image D_k and S_k are 0."""
     sc = _scene()
     integ = make("pt", sc)
     out, st, nbad = trace(integ, 5, 4, "replay+reconnection")
@@ -183,6 +183,8 @@ def test_stats_and_sum_buffers():
     for a in ("replay", "reconnection"):
         assert st[a]["run"] == st[a]["ok"] + st[a]["failed"]
         assert st_r[a]["run"] == st_r[a]["ok"] + st_r[a]["failed"]
+    # S_k - D_k = sum of w C (live shifts) and C (failed ones) over techniques: never negative
+    assert np.all(out[5:9] - out[1:5] >= -1e-12 * np.abs(out[5:9]).max())
     assert np.all(out[1 + 0, :, -1] == 0) and np.all(out[5 + 0, :, -1] == 0)      # right shift at the right edge
     assert np.all(out[1 + 3, 0, :] == 0) and np.all(out[5 + 3, 0, :] == 0)        # up shift at the top edge
 
