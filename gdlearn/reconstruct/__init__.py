@@ -31,12 +31,17 @@ API: every solver returns a :class:`Reconstruction`
   precond_dtype=np.float64)`` -- exact DCT solve (Neumann) or, with weights / missing data,
   Jacobi-scaled DCT-preconditioned CG; history: relative residual of the normal equations.
 * :func:`poisson_l1` ``(primal, gx, gy, alpha=0.2, *, irls_iterations=20, eps0=0.05,
-  eps_decay=0.5, cg_iterations=50, tol=1e-2, precond_dtype=np.float32)`` -- IRLS (the reference
-  solver's L1D preset plus an early exit the preconditioner makes effective); history: L1 energy
-  per reweighting.
+  eps_decay=0.5, cg_iterations=50, tol=None, precond_dtype=np.float32,
+  preconditioner="multigrid", mg_sweeps=2)`` -- IRLS (the reference solver's L1D preset); each
+  reweighting solves a float32 correction by CG with a multigrid V-cycle (:mod:`.multigrid`, on
+  the padded planar layout of :mod:`.planar`, driver in :mod:`.irls`) until its residual halves
+  -- one or two steps; ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1
+  energy per reweighting.
 
-Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 shared cores, CPU seconds): exact L2
-~0.11 s, 50 uniform CV iterations ~0.5 s, L1 defaults ~14 s (114 CG steps; ~1 s per 10 steps).
+Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 cores): exact L2 ~0.12 s, 50 uniform
+CV iterations ~0.55 s, L1 defaults ~14 s with the DCT preconditioner (114 CG steps, quiet machine);
+with the multigrid default ~22 CG steps and ~2.4 s of CPU time measured under a load of 5-7 on
+the 2 cores (the quiet-machine wall time is still to be measured).
 """
 from .control_variates import CVHistory, control_variates, cv_history
 from .conventions import Reconstruction, forward_differences, variances_from_halves

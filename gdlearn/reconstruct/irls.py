@@ -41,15 +41,15 @@ __all__ = ["irls_multigrid"]
 @kernel(fastmath=True)
 def _lengths(img, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey):
     """Colour lengths of the three residuals per pixel (padded H+2 x W+2, frame 0), validity of
-    Cv = 1 or C channels; returns (L1 energy, largest length)."""
+    Cv = 1 or C channels; returns (L1 energy, largest length). Squares are summed in row buffers
+    (cache-resident) so that e0 / ex / ey are written once."""
     c, hp, wp = img.shape
     cv = v0.shape[0]
     rows = np.zeros((hp, 2))
     for y in prange(1, hp - 1):
-        for x in range(wp):
-            e0[y, x] = 0.0
-            ex[y, x] = 0.0
-            ey[y, x] = 0.0
+        s0 = np.zeros(wp)
+        sx = np.zeros(wp)
+        sy = np.zeros(wp)
         for k in range(c):
             kv = k if cv > 1 else 0
             for x in range(1, wp - 1):
@@ -57,13 +57,13 @@ def _lengths(img, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey):
                 d0 = alpha * (ic - i0[k, y, x])
                 dx = img[k, y, x + 1] - ic - gx[k, y, x]
                 dy = img[k, y + 1, x] - ic - gy[k, y, x]
-                e0[y, x] += v0[kv, y, x] * d0 * d0
-                ex[y, x] += vx[kv, y, x] * dx * dx
-                ey[y, x] += vy[kv, y, x] * dy * dy
+                s0[x] += v0[kv, y, x] * d0 * d0
+                sx[x] += vx[kv, y, x] * dx * dx
+                sy[x] += vy[kv, y, x] * dy * dy
         tot = 0.0
         big = 0.0
         for x in range(1, wp - 1):
-            a, b, d = np.sqrt(e0[y, x]), np.sqrt(ex[y, x]), np.sqrt(ey[y, x])
+            a, b, d = np.sqrt(s0[x]), np.sqrt(sx[x]), np.sqrt(sy[x])
             e0[y, x] = a
             ex[y, x] = b
             ey[y, x] = d
@@ -171,7 +171,7 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
         _fill_weights(e0, ex, ey, eps, s, alpha * alpha, v0, vx, vy, *wts)
         _residual(x, i0, gx, gy, *wts, r)
         pre = Multigrid(*wts, dtype=dtype, sweeps=sweeps)
-        d, _, it = pcg_planar(r, *wts, pre, tol=tol, maxiter=cg_iterations)
+        d, _, it = pcg_planar(r, *wts, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True)
         x += d
         inner.append(it)
         energy, emax = _lengths(x, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey)

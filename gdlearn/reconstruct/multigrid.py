@@ -81,6 +81,20 @@ def _rb_sweep(z, b, w0, wx, wy, invd, colour):
 
 
 @kernel(fastmath=True)
+def _rb_first(z, b, invd):
+    """The first red sweep from z = 0: z = D^-1 b on colour 0, 0 on colour 1 (interior only, so
+    z needs no zeroing first)."""
+    c, hp, wp = z.shape
+    cw = invd.shape[0]
+    for y in prange(1, hp - 1):
+        for k in range(c):
+            kw = k if cw > 1 else 0
+            for x in range(1, wp - 1):
+                v = b[k, y, x] * invd[kw, y, x]
+                z[k, y, x] = v if (x + y) % 2 == 0 else 0.0
+
+
+@kernel(fastmath=True)
 def _scaled(b, invd, omega, out):
     """The first Jacobi sweep from z = 0: out = omega D^-1 b (frame stays 0)."""
     c, hp, wp = b.shape
@@ -218,9 +232,16 @@ class Multigrid:
             _inverse_diagonal(*ws, d)
             self.invd.append(d)
         self.pinv = _dense_pinv(*lv[-1])
+        self.buffers = None
 
     def __call__(self, r):
-        return self._cycle(0, np.ascontiguousarray(r, dtype=self.dtype))
+        r = np.ascontiguousarray(r, dtype=self.dtype)
+        if self.buffers is None or self.buffers[0][0].shape[0] != r.shape[0]:
+            self.buffers = []
+            for lv, nxt in zip(self.levels[:-1], self.levels[1:]):
+                self.buffers.append((np.zeros((r.shape[0],) + lv[0].shape[1:], self.dtype),
+                                     np.zeros((r.shape[0],) + nxt[0].shape[1:], self.dtype)))
+        return self._cycle(0, r)
 
     def _cycle(self, level, b):
         if level == len(self.levels) - 1:
@@ -252,13 +273,14 @@ class Multigrid:
 
     def _cycle_rbgs(self, level, b, ws, invd):
         """Red-black Gauss-Seidel: red, black before the correction, black, red after it (the
-        adjoint order, so that B stays symmetric)."""
-        z = np.zeros_like(b)
-        for _ in range(self.sweeps):
+        adjoint order, so that B stays symmetric). Each level's z and coarse residual live in
+        buffers made once (a returned z is valid until the next call)."""
+        z, rc = self.buffers[level]
+        _rb_first(z, b, invd)               # = the red sweep from z = 0
+        _rb_sweep(z, b, *ws, invd, 1)
+        for _ in range(self.sweeps - 1):
             _rb_sweep(z, b, *ws, invd, 0)
             _rb_sweep(z, b, *ws, invd, 1)
-        cw, hcp, wcp = self.levels[level + 1][0].shape
-        rc = np.empty((b.shape[0], hcp, wcp), dtype=self.dtype)
         _residual_restrict(z, b, *ws, rc)
         _prolong_add(z, self._cycle(level + 1, rc))
         for _ in range(self.sweeps):

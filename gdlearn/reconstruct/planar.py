@@ -99,12 +99,13 @@ def _direction(p, z, beta):
                 p[k, y, i] = z[k, y, i] + bk * p[k, y, i]
 
 
-def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None):
+def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False):
     """Preconditioned CG on ``A d = b`` from d = 0, one independent system per channel, in the
     dtype of ``b`` (float32 or float64). Stops when ||b - A d|| <= tol * bnorm (bnorm defaults to
-    ||b||) or after ``maxiter`` steps. Returns (d, history of ||b - A d|| / bnorm, steps)."""
+    ||b||) or after ``maxiter`` steps. Returns (d, history of ||b - A d|| / bnorm, steps).
+    ``overwrite_b``: use ``b`` as the residual's storage (saves a copy)."""
     d = np.zeros_like(b)
-    r = b.copy()
+    r = b if overwrite_b else b.copy()
     ap = np.zeros_like(b)             # apply_planar writes the interior: the frame stays 0
     rr = _dot(r, r)
     if bnorm is None:

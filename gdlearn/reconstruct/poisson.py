@@ -173,12 +173,15 @@ def _solve_weighted(prob, w0, wx, wy, x0, tol, maxiter, dtype=np.float64):
     return x, hist, it
 
 
-def _exact_l2(prob: Problem, alpha: float):
-    """The exact DCT solve for complete data; returns (image, relative residual)."""
+def _exact_l2(prob: Problem, alpha: float, residual: bool = True):
+    """The exact DCT solve for complete data; returns (image, relative residual or None when
+    ``residual`` is False -- IRLS's start needs no report and saves a pass)."""
     a2 = alpha * alpha
     b = np.empty_like(prob.primal)
     uniform_rhs(prob.primal, prob.gx, prob.gy, a2, b)
     x = solve_shifted_laplacian(b, a2, 1.0, mean=prob.primal.mean(axis=(0, 1)))
+    if not residual:
+        return x, None
     rr, bb = uniform_residual(x, b, a2)
     return x, float(np.sqrt(rr / bb)) if bb > 0 else float(np.sqrt(rr))
 
@@ -262,7 +265,7 @@ def poisson_l1(primal, gx, gy, alpha: float = 0.2, *, irls_iterations: int = 20,
     prob = prepare(primal, gx, gy)
     counts = dict(prob.nonfinite)
     if prob.complete:
-        x, _ = _exact_l2(prob, alpha)
+        x, _ = _exact_l2(prob, alpha, residual=False)
         inner = [0]
     else:
         w0, wx, wy = _weighted_system(prob, alpha, None, counts)
