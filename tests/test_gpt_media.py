@@ -17,7 +17,7 @@ import pytest
 from scipy import stats
 
 from gdlearn.integrators import make, render
-from gdlearn.kernels.gpt_shift import BROKEN_MIS
+from gdlearn.kernels.gpt_shift import BROKEN_MIS, BROKEN_PRIMAL
 from gdlearn.kernels.gpt_volume import gpt_volume_rows
 from gdlearn.scene.load import load
 from gdlearn.shifts.policy import N_STATS, policy_code, stats_dict
@@ -155,6 +155,38 @@ def test_chromatic_dense_fog_gradients_are_unbiased(policy):
     tx, ty, k = block_t(dx, dy)
     assert tx.max() < k and ty.max() < k and omnibus(tx, ty) < OMNIBUS_MAX, (
         f"chromatic fog: block |t| {tx.max():.2f}, {ty.max():.2f} (k = {k:.2f}), mean t^2 {omnibus(tx, ty):.2f}")
+
+
+def _primal_pairs(broken=0, n=N_SEEDS):
+    """Per seed, the MIS primal of each neighbour pair minus the base radiance: for the pair
+    (p, q = p + right) B_right(p) + S_left(q) estimates I_p, with B_k = S_k - D_k the weighted base
+    terms; likewise (down, up). Returns (dx, dy) with E = 0 if S_k is right."""
+    integ = make("pt", _scene())
+    dx, dy = [], []
+    for seed in range(n):
+        out, _, nbad = trace(integ, 2000 + seed, SPP, "halfvector+reconnection", broken)
+        assert nbad == 0
+        L, D, S = out[0], out[1:5], out[5:9]
+        B = S - D
+        dx.append(B[0][:, :-1] + S[1][:, 1:] - L[:, :-1])
+        dy.append(B[2][:-1, :] + S[3][1:, :] - L[:-1, :])
+    return np.stack(dx), np.stack(dy)
+
+
+def test_sum_buffers_give_an_unbiased_mis_primal():
+    """S_k (the weighted offset contributions) against pt's radiance L: the pairwise MIS primal
+    B_k(p) + S_opposite(q) has the mean of L(p) (block t-test as for the gradients)."""
+    dx, dy = _primal_pairs()
+    tx, ty, k = block_t(dx, dy)
+    assert tx.max() < k and ty.max() < k and omnibus(tx, ty) < OMNIBUS_MAX, (
+        f"MIS primal: block |t| {tx.max():.2f} {ty.max():.2f} (k = {k:.2f}), mean t^2 {omnibus(tx, ty):.2f}")
+
+
+def test_unweighted_sum_buffers_fail_the_same_test():
+    """S_k = sum C' instead of sum w C' (gpt_shift.BROKEN_PRIMAL) counts shifted light twice."""
+    dx, dy = _primal_pairs(BROKEN_PRIMAL)
+    tx, ty, k = block_t(dx, dy)
+    assert max(tx.max(), ty.max()) > k, f"the test cannot see unweighted S_k: block |t| {tx.max():.2f} {ty.max():.2f}"
 
 
 def test_base_radiance_is_pt_bit_for_bit_without_roulette():

@@ -22,7 +22,8 @@ transmittance. Emission seen *on* a null interface is not handled (volpath adds 
 scenes has an emitting null shape): such light enters L but not the gradients.
 
 Output per sample: L, and per shift k the gradient sample D_k = sum over techniques of w (C' - C)
-(failed: -C) and S_k = sum of w C' (Eq. 16; w of Eq. 17 in log-ratio form).
+(failed: -C) and S_k = sum of w C' (Eq. 16; w of Eq. 17 in log-ratio form). B_k = S_k - D_k is the
+weighted base term, so B_k(p) + S_opposite(q) is the pair's MIS estimate of I_p.
 """
 import math
 

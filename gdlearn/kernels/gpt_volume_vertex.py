@@ -14,7 +14,7 @@ from numba import njit
 
 from gdlearn.kernels.bsdf import bsdf_eval, bsdf_pdf, lobe_class, vertex_class
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.gpt_shift import (BROKEN_JACOBIAN, BROKEN_MIS, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P,
+from gdlearn.kernels.gpt_shift import (BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P,
                                        F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM,
                                        I_RECONN, I_STATE, JOINED, MERGED, FREE, NF, NI, get3, light_weight,
                                        mul3, sc3, set3)
@@ -42,8 +42,9 @@ NFV = NF + 7
 I_MED, I_KIND = NI, NI + 1
 NIV = NI + 2
 K_SURFACE, K_MEDIUM, K_ESCAPED = 0, 1, 2
-#: deliberately broken variant for the tests (the others are gpt_shift's): the flight of an offset
-#: gets the base's weight, i.e. the transmittance and distance-pdf ratios are ignored
+#: deliberately broken variant (the others are gpt_shift's: MIS, JACOBIAN, PRIMAL apply here too): the
+#: flight of an offset gets the base's weight, i.e. its own transmittance and distance-pdf ratios are
+#: ignored. Measured: too weak for tests/test_gpt_media.py's 32-seed test to catch on the fog boxes.
 BROKEN_TRANSMITTANCE = 10
 
 
@@ -113,9 +114,10 @@ def pair(diff, summ, of, oi, k, co, cb, broken):
     if oi[k, I_ALIVE] == ALIVE:
         wgt = 1.0 if broken == BROKEN_MIS else mis_weight_from_log_ratio(of[k, F_LR])
         if wgt > 0.0:
+            ws = 1.0 if broken == BROKEN_PRIMAL else wgt
             for c in range(3):
                 diff[k, c] += wgt * (co[c] - cb[c])
-                summ[k, c] += wgt * co[c]
+                summ[k, c] += ws * co[c]
     elif oi[k, I_ALIVE] == FAILED:
         for c in range(3):
             diff[k, c] -= cb[c]
