@@ -64,8 +64,8 @@ def trace(integ, seed, spp, policy, broken=0, sample0=0):
     return out, stats_dict(st.sum(axis=0)), int(bad.sum())
 
 
-def _runs(scene, policy, broken=0, n=N_SEEDS):
-    integ = make("pt", scene)            # compiled scene and the depth / roulette / effects settings
+def _runs(scene, policy, broken=0, n=N_SEEDS, effects=None):
+    integ = make("pt", scene, effects=effects)   # compiled scene, depth / roulette / effects settings
     p, gx, gy = [], [], []
     for seed in range(n):
         out, _, nbad = trace(integ, 1000 + seed, SPP, policy, broken)
@@ -139,6 +139,16 @@ def test_mis_weight_one_on_both_sides_fails_the_same_test():
     dx, dy = differences(*_runs(_scene(), "halfvector+reconnection", broken=BROKEN_MIS))
     px, py, pxy, kp = projected_t(dx, dy)
     assert max(px, py, pxy) > kp, f"the test cannot see doubled gradients: |t| {px:.2f} {py:.2f} {pxy:.2f}"
+
+
+@pytest.mark.parametrize("effects", ["single-scattering", "multiple-scattering,direct-lighting"])
+def test_effects_restricted_gradients_are_unbiased(effects):
+    """Each path's own class decides whether its contribution counts (an offset's class may differ
+    from its base's): gradients of a restricted image are still those of its primal."""
+    dx, dy = differences(*_runs(_scene(), "halfvector+reconnection", effects=effects))
+    tx, ty, k = block_t(dx, dy)
+    assert tx.max() < k and ty.max() < k and omnibus(tx, ty) < OMNIBUS_MAX, (
+        f"{effects}: block |t| {tx.max():.2f} {ty.max():.2f} (k = {k:.2f}), mean t^2 {omnibus(tx, ty):.2f}")
 
 
 #: a denser, chromatic fog (sigma_t per channel): spectral MIS makes T / P(pass) differ from 1 and
