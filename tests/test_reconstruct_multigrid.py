@@ -55,19 +55,20 @@ def vcycle_matrix(mg, h, w, c):
     for i in range(n):
         e = np.zeros((h, w, c))
         e.flat[i * c] = 1.0
-        b[:, i] = from_planar(mg(to_planar(e)))[..., 0].ravel()
+        b[:, i] = from_planar(mg(to_planar(e)))[..., 0].ravel()   # from_planar copies
     return b
 
 
-@pytest.mark.parametrize("alpha2, sweeps", [(0.04, 1), (0.04, 2), (0.0, 2)])
-def test_vcycle_is_spd_and_reduces_the_error(alpha2, sweeps):
+@pytest.mark.parametrize("alpha2, sweeps, smoother", [(0.04, 1, "rbgs"), (0.04, 2, "rbgs"),
+                                                      (0.0, 2, "rbgs"), (0.04, 2, "jacobi")])
+def test_vcycle_is_spd_and_reduces_the_error(alpha2, sweeps, smoother):
     """B symmetric, positive definite (semi-definite with the constant null mode when alpha = 0),
     and the eigenvalues of BA lie in (0, 2): as a stationary iteration x += B (b - A x) the V-cycle
     reduces every error component (the A-norm contraction CG's convergence rests on)."""
     rng = np.random.default_rng(1)
     h, w = 19, 23                          # odd sizes: blocks of 1 at the end of every level
     ws = planar_weights(h, w, 1, rng, 6.0, alpha2)   # weights spanning e^12 ~ 1.6e5
-    mg = Multigrid(*ws, dtype=np.float64, sweeps=sweeps)
+    mg = Multigrid(*ws, dtype=np.float64, sweeps=sweeps, smoother=smoother)
     assert len(mg.levels) >= 3                       # a real hierarchy, not just a dense solve
     b = vcycle_matrix(mg, h, w, 1)
     a = sparse_operator(*ws, 0)

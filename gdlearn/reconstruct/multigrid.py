@@ -1,29 +1,29 @@
 """A multigrid V-cycle preconditioner for the weighted screened Poisson operator, on the padded
-planar layout of :mod:`.planar` (the inner solve of L1 by IRLS, Hua et al. 2019 Sec. 5.1: the reweighting
-makes the weights span many decades, where a DCT solve of the mean-weight operator is a poor
-preconditioner).
+planar layout of :mod:`.planar` -- the inner solve of L1 by IRLS (Hua et al. 2019, Sec. 5.1):
+the reweighting makes the weights span many decades, where a DCT solve of the mean-weight
+operator is a poor preconditioner.
 
 Operator (as in :mod:`.operators`): ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy``.
 
-**Layout.** Vectors are ``C x (H+2) x (W+2)`` and weights ``Cw x (H+2) x (W+2)`` (``Cw = 1``: one
-weight per pixel shared by the channels; ``Cw = C``: per channel). Pixel (y, x) sits at
-[k, y+1, x+1]; the one-pixel frame holds 0 in every vector and weight, and ``wx[Y, X]`` is the
-edge (Y, X)-(Y, X+1), ``wy[Y, X]`` the edge (Y, X)-(Y+1, X), so the masked last column / row and
-the frame weigh 0. Every stencil then runs over the interior without a single boundary test and
-each row is a contiguous loop that LLVM vectorises (the interleaved H x W x C kernels of
-:mod:`.operators` branch per value and run ~10x slower).
+Layout: see :mod:`.planar` (padded C x (H+2) x (W+2) vectors, Cw x (H+2) x (W+2) weights with a
+zero frame), so every stencil here runs without boundary tests.
 
-**V-cycle.** Coarsening by aggregation: each 2 x 2 block is one coarse cell; prolongation P copies
-a coarse value to its block, restriction is P^T (block sum). The coarse operator keeps the 5-point
-form: ``W0c = P^T W0 P`` (block sums) and a coarse edge weighs ``edge_factor`` times the sum of
-the two fine edges it crosses. Galerkin (factor 1) is exactly P^T A P, but piecewise-constant P
-then over-estimates the coarse Laplacian by 2 for smooth errors; factor 1/2 re-discretises it on
-the coarse cells (cell-centred multigrid, Wesseling 1992, Ch. 5). Smoother: damped Jacobi,
-``omega = 0.8`` (symmetric, so the same sweeps before and after the coarse correction make the
-V-cycle symmetric); the coarsest grid (<= ``COARSEST_CELLS`` cells) is solved by pseudo-inverse.
-Since ``2 D / omega - A`` is positive definite (A is diagonally dominant), the V-cycle ``B`` is
-symmetric positive semi-definite, definite when A is -- what CG needs of a preconditioner
-(tests/test_reconstruct_multigrid.py checks both, and that a cycle reduces the residual).
+**Coarsening** by aggregation: each 2 x 2 block is one coarse cell; prolongation P copies a coarse
+value to its block, restriction is P^T (block sum). The coarse operator keeps the 5-point form:
+``W0c = P^T W0 P`` (block sums) and a coarse edge weighs ``edge_factor`` times the sum of the two
+fine edges it crosses. Galerkin (factor 1) is exactly P^T A P, but piecewise-constant P then
+over-estimates the coarse Laplacian by 2 for smooth errors; factor 1/2 re-discretises it on the
+coarse cells (cell-centred multigrid, Wesseling 1992, Ch. 5). The coarsest grid
+(<= ``COARSEST_CELLS`` cells) is solved by a dense pseudo-inverse.
+
+**Smoothers.** Red-black Gauss-Seidel (default): red then black before the coarse correction,
+black then red after it -- the post-smoother is the adjoint of the pre-smoother. Or damped Jacobi
+(``omega = 0.8``, symmetric, the same sweeps before and after); per CG step it is cheaper but
+weaker (measured on the 320 x 180 benchmark problem: 2 Jacobi sweeps reach a worse L1 energy than
+1 Gauss-Seidel sweep). Either smoother S satisfies ``S + S^T - A`` positive definite (A is
+diagonally dominant), so the V-cycle ``B`` is symmetric positive semi-definite, definite when A
+is -- what CG needs of a preconditioner (tests/test_reconstruct_multigrid.py checks it, and that
+the eigenvalues of BA lie in (0, 2): each cycle contracts the error).
 """
 from __future__ import annotations
 
@@ -159,7 +159,8 @@ def _coarsen(w0, wx, wy, factor, c0, cx, cy):
                     cy[k, yc, xc] = 0.0
                     continue
                 y, x = 2 * yc - 1, 2 * xc - 1
-                c0[k, yc, xc] = w0[k, y, x] + w0[k, y, x + 1] + w0[k, y + 1, x] + w0[k, y + 1, x + 1]
+                c0[k, yc, xc] = (w0[k, y, x] + w0[k, y, x + 1] + w0[k, y + 1, x]
+                                 + w0[k, y + 1, x + 1])
                 cx[k, yc, xc] = factor * (wx[k, y, x + 1] + wx[k, y + 1, x + 1])
                 cy[k, yc, xc] = factor * (wy[k, y + 1, x] + wy[k, y + 1, x + 1])
 
@@ -205,7 +206,9 @@ class Multigrid:
 
     ``w0, wx, wy``: Cw x (H+2) x (W+2), frame and masked edges 0. ``dtype`` of the vectors and
     weights of every level (float32 halves the memory traffic; the preconditioner's own error is
-    far above float32 round-off). ``sweeps``: Jacobi sweeps before and after each correction.
+    far above float32 round-off). ``sweeps``: smoothing sweeps before and after each correction;
+    ``smoother``: "rbgs" (red-black Gauss-Seidel) or "jacobi" (damped by ``omega``). The
+    returned z lives in a buffer reused by the next call (copy it to keep it).
     """
 
     def __init__(self, w0, wx, wy, dtype=np.float32, sweeps=1,
