@@ -39,9 +39,9 @@ API: every solver returns a :class:`Reconstruction`
   energy per reweighting.
 
 Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 cores): exact L2 ~0.12 s, 50 uniform
-CV iterations ~0.55 s, L1 defaults ~14 s with the DCT preconditioner (114 CG steps, quiet machine);
-with the multigrid default ~22 CG steps and ~2.4 s of CPU time measured under a load of 5-7 on
-the 2 cores (the quiet-machine wall time is still to be measured).
+CV iterations ~0.55 s (quiet machine). L1 defaults: 22 multigrid-preconditioned CG steps, 2.6 s of
+CPU time under a load of ~5 on the 2 cores, against 114 DCT-preconditioned steps and 19.9 s of CPU
+time for the previous default (14 s wall on a quiet machine) -- quiet-machine wall time pending.
 """
 from .control_variates import CVHistory, control_variates, cv_history
 from .conventions import Reconstruction, forward_differences, variances_from_halves
