@@ -202,6 +202,15 @@ def test_bad_options_are_clear_errors():
     with pytest.raises(ValueError, match="unknown shift policy"):
         make("gpt", sc, shift="teleport")
     with pytest.raises(ValueError, match="not supported"):
-        make("gpt", sc, shift="halfvector+reconnection+manifold")
-    with pytest.raises(ValueError, match="media"):
-        make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES))
+        make("gpt", sc, shift="halfvector+reconnection+manifold")     # experimental only
+    fog = load(f"{ROOT}/scenes/fog-box.xml", res=RES)
+    with pytest.raises(ValueError, match="manifold exploration is not implemented in media"):
+        make("gpt", fog, shift="halfvector+reconnection+manifold", experimental=True)
+
+
+def test_media_dispatch_to_the_volume_kernel():
+    """Scenes with media run gpt_volume_rows (same signature and out contract), imported lazily."""
+    from gdlearn.kernels.gpt_volume import gpt_volume_rows
+    from gdlearn.integrators.gpt import gpt_rows
+    assert make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES)).kernel is gpt_volume_rows
+    assert make("gpt", _scene("cornell-box")).kernel is gpt_rows

@@ -15,11 +15,15 @@ the neighbour, with the same Eq. 17 weights. ``images["primal"]`` is that estima
 
 Policies shipped: ``replay+reconnection`` and ``halfvector+reconnection`` (the default, Kettunen et
 al.'s and the STAR Fig. 5's best), plus ``replay`` (the same as ``gpt-replay`` with MIS weights,
-which reduce to 1/2 for replay). Manifold exploration and media are not supported by this
-integrator yet (a clear error says so; ``gpt-replay`` handles media).
+which reduce to 1/2 for replay). ``halfvector+reconnection+manifold`` (manifold exploration of
+specular chains between connectable vertices, :mod:`gdlearn.kernels.gpt_manifold`) is experimental:
+``make("gpt", scene, shift=..., experimental=True)``. It runs only where the effects plan has specular
+chains and the scene has analytic specular shapes (``self.manifold``); elsewhere it is
+halfvector+reconnection. Scenes with media or null interfaces run the twin kernel
+:func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same signature and buffers), imported lazily.
 
 Frame stats: ``paths``, ``nonfinite_samples`` and, per shift action, ``shift_<action>_{run,ok,failed}``
-(actions: replay, halfvector, reconnection, fail) counted over offset path segments.
+(actions: replay, halfvector, reconnection, manifold, fail) counted over offset path segments.
 """
 from __future__ import annotations
 
@@ -31,16 +35,22 @@ from numba import njit, prange
 
 from ..kernels.bvh import STACK_SIZE
 from ..kernels.gpt_path import gpt_sample
+from ..kernels.gpt_manifold import NCF, NCI, manifold_table
 from ..kernels.gpt_shift import NF, NI
 from ..kernels.rng import rand
 from ..scene.compile import borrowed
-from ..shifts.policy import N_STATS, POLICIES, policy_code, stats_dict
+from ..shifts.manifold import SH_WIDTH
+from ..shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION,
+                             POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from ..shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
 from .base import PassResult
 from .pt import PathTracer
 
-#: policies whose unbiasedness tests pass (tests/test_gpt.py); manifold is not wired in yet
+#: policies whose unbiasedness tests pass (tests/test_gpt.py) *and* whose deliberately broken variants fail them
 SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection")
+#: wired in and unbiased in tests/test_gpt_manifold.py, but its broken variant (Jacobian 1) is not yet
+#: caught by the test: selectable only with ``experimental=True``
+EXPERIMENTAL = ("halfvector+reconnection+manifold",)
 DEFAULT_POLICY = "halfvector+reconnection"
 
 
@@ -54,11 +64,20 @@ def gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshol
     signature and contract."""
     # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed, as pt)
     _gpt_rows(borrowed(sa), seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats,
-              bad)
+              bad, np.full((1, SH_WIDTH), -1.0))
+
+
+@njit(cache=True, error_model="numpy")
+def gpt_manifold_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad,
+                      mtab):
+    """:func:`gpt_rows` with the manifold shape table ``mtab`` (:func:`gdlearn.kernels.gpt_manifold.manifold_table`)
+    for the policy ``halfvector+reconnection+manifold``."""
+    _gpt_rows(borrowed(sa), seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats,
+              bad, mtab)
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad):
+def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, threshold, broken, out, stats, bad, mtab):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
     for y in prange(h):
@@ -67,6 +86,8 @@ def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, thresho
         oi = np.zeros((4, NI), dtype=np.int64)
         diff = np.zeros((8, 3))
         acc = np.zeros((9, 3))
+        cf = np.zeros((MAX_CHAIN + 1, NCF))
+        ci = np.zeros((MAX_CHAIN + 1, NCI), dtype=np.int64)
         st = stats[y]
         for x in range(w):
             key = y * w + x
@@ -74,7 +95,7 @@ def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, thresho
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
                 c = gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
-                               threshold, of, oi, diff, st, stack, broken)
+                               threshold, of, oi, diff, st, stack, mtab, cf, ci, broken)
                 if not (np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]) and np.all(np.isfinite(diff))):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                     continue
@@ -114,24 +135,48 @@ def mis_primal(out: np.ndarray) -> np.ndarray:
     return 0.25 * acc
 
 
+def _volume_kernel():
+    """The media twin of :func:`gpt_rows` (same signature and out contract), imported only when a scene
+    needs it; a clear error until gdlearn.kernels.gpt_volume exists."""
+    try:
+        from ..kernels.gpt_volume import gpt_volume_rows
+    except ImportError:
+        raise ValueError("gpt: scenes with media or null interfaces are not supported yet; fix: render "
+                         "them with --integrator gpt-replay") from None
+    return gpt_volume_rows
+
+
 class GradientPathTracer(PathTracer):
     """``make("gpt", scene, shift="halfvector+reconnection", seed=0, spp_per_pass=1, effects=None,
     threads=None, max_depth=None)``; options as :class:`~gdlearn.integrators.pt.PathTracer` plus
-    ``shift``, the policy name (one of :data:`SUPPORTED`)."""
+    ``shift``, the policy name (one of :data:`SUPPORTED`; :data:`EXPERIMENTAL` ones with
+    ``experimental=True``)."""
 
     name = "gpt"
 
-    def __init__(self, scene, *, shift: str = DEFAULT_POLICY, **options):
+    def __init__(self, scene, *, shift: str = DEFAULT_POLICY, experimental: bool = False, **options):
         super().__init__(scene, **options)
         code = policy_code(shift)
-        if shift not in SUPPORTED:
+        if shift not in SUPPORTED and not (experimental and shift in EXPERIMENTAL):
             raise ValueError(f"gpt: shift policy {shift!r} is not supported by this integrator yet; fix: use "
                              f"one of {', '.join(SUPPORTED)}")
-        if self.media or any(s.bsdf.type == "null" for s in self.scene.shapes):
-            raise ValueError("gpt: scenes with media or null interfaces are not supported yet; fix: render "
-                             "them with --integrator gpt-replay")
         assert POLICIES[shift] == code
         self.shift, self.policy = shift, code
+        self.kernel, self.mtab = gpt_rows, None
+        if self.media or any(s.bsdf is not None and s.bsdf.type == "null" for s in self.scene.shapes):
+            self.kernel = _volume_kernel()
+            if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
+                raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "
+                                 "halfvector+reconnection")
+        elif code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
+            mtab = manifold_table(self.scene, self.sa)
+            if self.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
+                self.kernel, self.mtab = gpt_manifold_rows, mtab
+            else:
+                # no specular chain the walk could move: the manifold code does not run (same estimator)
+                self.policy = POLICY_HALFVECTOR_RECONNECTION
+        #: True when the manifold walk runs for this scene (plan + analytic specular shapes)
+        self.manifold = self.mtab is not None
         #: tests only: gpt_shift.BROKEN_MIS / BROKEN_JACOBIAN make a deliberately biased estimator
         self._broken = 0
 
@@ -145,8 +190,12 @@ class GradientPathTracer(PathTracer):
             numba.set_num_threads(int(self.threads))
         try:
             with numba.parallel_chunksize(max(1, h // 32)):
-                gpt_rows(self.sa, self.seed, sample0, spp, self.policy, self.max_depth, self.rr_depth, self.mask,
-                         self.threshold, self._broken, out, stats, bad)
+                args = (self.sa, self.seed, sample0, spp, self.policy, self.max_depth, self.rr_depth, self.mask,
+                        self.threshold, self._broken, out, stats, bad)
+                if self.mtab is not None:
+                    self.kernel(*args, self.mtab)
+                else:
+                    self.kernel(*args)
         finally:
             numba.set_num_threads(old)
         return out, stats.sum(axis=0), int(bad.sum())
@@ -171,8 +220,6 @@ class GradientPathTracer(PathTracer):
         t2 = time.perf_counter()
         stats = {"paths": self.width * self.height * self.spp_per_pass, "nonfinite_samples": nbad}
         for action, c in stats_dict(st).items():
-            if action == "manifold":
-                continue
             for outcome, v in c.items():
                 stats[f"shift_{action}_{outcome}"] = v
         return PassResult(images={"primal": primal, "primal_base": out[0], "gx": gx, "gy": gy}, spp=self.spp_per_pass,

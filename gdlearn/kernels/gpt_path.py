@@ -37,7 +37,7 @@ from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lob
                                   sampled_lobe_class, vertex_class)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.gpt_shift import (BROKEN_MIS, BROKEN_PRIMAL, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+from gdlearn.kernels.gpt_shift import (BROKEN_MANIFOLD_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, I_PENDING, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                        I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                        I_STATE, JOINED, MERGED, FREE, conn, decide, emitted, get3,
                                        mul3, nee_at, sc3, set3, shift_direction, vclass_of, _update)
@@ -49,7 +49,10 @@ from gdlearn.kernels.scene_query import intersect
 from gdlearn.kernels.surface_path import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, record
+from gdlearn.kernels.gpt_manifold import lookahead_chain, manifold_offset, same_shape
+from gdlearn.kernels.layout import V_SPECULAR
+from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
+                                   SHIFT_RECONNECT, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 
 ONE3 = (1.0, 1.0, 1.0)
@@ -92,6 +95,7 @@ def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
         oi[k, I_PREV_DELTA] = 1
         oi[k, I_RECONN] = FREE
         oi[k, I_STATE] = pc_init()
+        oi[k, I_PENDING] = 0
         oi[k, I_ALIVE] = ALIVE
 
 
@@ -114,7 +118,8 @@ def _pair(diff, of, oi, k, co, cb, broken):
 def _emission_pairs(sa, of, oi, diff, cb, mask, broken):
     for k in range(4):
         co = (0.0, 0.0, 0.0)
-        if oi[k, I_ALIVE] == ALIVE and _wanted(mask, oi[k, I_STATE]):
+        # a pending manifold offset already sits at x_c; the base crosses the chain (no emitters) first
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_PENDING] == 0 and _wanted(mask, oi[k, I_STATE]):
             wi = get3(of, k, F_WI)
             le = emitted(sa, oi[k, I_ESCAPED] == 1, oi[k, I_PRIM], get3(of, k, F_POS), get3(of, k, F_NS),
                          (-wi[0], -wi[1], -wi[2]), get3(of, k, F_PREV_P), of[k, F_PREV_PDF],
@@ -133,7 +138,7 @@ def _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, 
         fixed_point = False
     for k in range(4):
         co = (0.0, 0.0, 0.0)
-        if oi[k, I_ALIVE] == ALIVE:
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_PENDING] == 0:
             mat_o = sa.materials[oi[k, I_MAT]]
             if _wanted(mask, pc_push(oi[k, I_STATE], vertex_class(mat_o, threshold))):
                 if oi[k, I_RECONN] == MERGED:
@@ -199,6 +204,10 @@ def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta
         _set_hit(sa, of, oi, k, hit, prim, q, ng, ns, wo_w)
         # the next vertices must agree in kind, else the reverse shift would choose differently
         ok = conn(vclass_of(sa, not hit, prim, threshold)) == conn(cls_next) and hit == hit2
+        # with manifold exploration a copied specular vertex must lie on the base's shape: then the
+        # offset's chain qualifies for the manifold walk exactly when the base's does (gpt_manifold)
+        if ok and hit and policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and cls_next == V_SPECULAR:
+            ok = same_shape(sa, prim, prim2)
     record(stats, action, ok)
     if not ok:
         oi[k, I_ALIVE] = FAILED
@@ -269,10 +278,27 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, 
 
 @njit(cache=True, error_model="numpy")
 def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, us, hit2, prim2, p2, ng2, ns2,
-                   d2, threshold, broken, stats, stack):
-    """Extend every live offset by the segment the base just sampled (p -> p2 along d2)."""
+                   d2, threshold, broken, stats, stack, mtab, m, cf, ci):
+    """Extend every live offset by the segment the base just sampled (p -> p2 along d2). ``m`` > 0: the
+    segment starts a qualifying specular chain of length m (cf, ci: :func:`gpt_manifold.lookahead_chain`),
+    and free offsets take the manifold shift."""
     for k in range(4):
         if oi[k, I_ALIVE] != ALIVE:
+            continue
+        if oi[k, I_PENDING] > 0:             # moved to x_c already: wait for the base
+            oi[k, I_PENDING] -= 1
+            continue
+        if m > 0 and oi[k, I_RECONN] == FREE and oi[k, I_ESCAPED] == 0:
+            mat_o = sa.materials[oi[k, I_MAT]]
+            if decide(policy, cls_b, vertex_class(mat_o, threshold), V_SPECULAR) == SHIFT_FAIL:
+                record(stats, SHIFT_FAIL, False)
+                oi[k, I_ALIVE] = FAILED
+                continue
+            ok = manifold_offset(sa, mtab, k, of, oi, m, cf, ci, p, mat_o, pdf, threshold,
+                                 broken == BROKEN_MANIFOLD_JACOBIAN, stack)
+            record(stats, SHIFT_MANIFOLD, ok)
+            if not ok:
+                oi[k, I_ALIVE] = FAILED
             continue
         if oi[k, I_RECONN] != FREE:
             _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
@@ -284,13 +310,21 @@ def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _any_free(oi):
+    for k in range(4):
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_RECONN] == FREE and oi[k, I_PENDING] == 0:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def cls_next_of(sa, hit2, prim2, threshold):
     return vclass_of(sa, not hit2, prim2, threshold)
 
 
 @njit(cache=True, error_model="numpy")
 def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask, threshold,
-               of, oi, diff, stats, stack, broken=0):
+               of, oi, diff, stats, stack, mtab, cf, ci, broken=0):
     """One base path through film point (fx, fy) of pixel (x, y) and its four shifts. Returns the
     base radiance (the primal sample); ``diff`` (8, 3): ``diff[k]`` receives the gradient sample of
     shift k (right, left, down, up), zero for a shift outside the image, and ``diff[4 + k]`` the
@@ -332,8 +366,13 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth
         cls_b = sampled_lobe_class(mat, wi, u_lobe, delta, threshold)
         d2 = to_world(wo, sf, tf, ns)
         hit2, _, prim2, p2, ng2, ns2, _ = intersect(sa, offset_origin(p, ng, d2), d2, 0.0, math.inf, stack)
+        m = 0
+        if policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_b) and hit2 and \
+                vclass_of(sa, False, prim2, threshold) == V_SPECULAR and _any_free(oi):
+            m = lookahead_chain(sa, mtab, hit2, prim2, p2, ng2, ns2, d2, seed, key, s, depth + 1, threshold, cf, ci,
+                                stack)
         _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, (u_lobe, u1, u2), hit2, prim2,
-                       p2, ng2, ns2, d2, threshold, broken, stats, stack)
+                       p2, ng2, ns2, d2, threshold, broken, stats, stack, mtab, m, cf, ci)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)
         prev_p, prev_pdf, prev_delta = p, pdf, delta

@@ -35,17 +35,19 @@ from gdlearn.shifts.reconnection import connectable, reconnect
 ZERO3 = (0.0, 0.0, 0.0)
 #: deliberately broken variants, for tests that must be able to fail: Eq. 17 weight 1 on both sides;
 #: the reconnection's solid-angle Jacobian replaced by 1; the half-vector copy's J_w replaced by 1;
-#: the offset's share of the MIS primal left unweighted (S_k = sum C' instead of sum w C')
-BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN, BROKEN_PRIMAL = 0, 1, 2, 3, 4
+#: the offset's share of the MIS primal left unweighted (S_k = sum C' instead of sum w C'); the
+#: manifold shift's Jacobian |dx'_1/dx_1| replaced by 1
+BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN, BROKEN_PRIMAL, BROKEN_MANIFOLD_JACOBIAN = range(6)
 #: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
 ESCAPED = -1
 
 # float columns of ``of``
 F_POS, F_NG, F_NS, F_WI, F_BETA, F_LR, F_PREV_PDF, F_PREV_P = 0, 3, 6, 9, 12, 15, 16, 17
 NF = 20
-# int columns of ``oi``
-I_ALIVE, I_MAT, I_RECONN, I_PREV_DELTA, I_ESCAPED, I_STATE, I_PRIM = range(7)
-NI = 7
+# int columns of ``oi`` (I_PENDING: base segments left until the base reaches the vertex a manifold
+# shift already moved the offset to, :mod:`gdlearn.kernels.gpt_manifold`)
+I_ALIVE, I_MAT, I_RECONN, I_PREV_DELTA, I_ESCAPED, I_STATE, I_PRIM, I_PENDING = range(8)
+NI = 8
 # I_RECONN values: not yet joined, joined at this vertex (own incoming direction), identical to base
 FREE, JOINED, MERGED = 0, 1, 2
 
