@@ -33,7 +33,7 @@ from gdlearn.kernels.bsdf import bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_s
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.kernels.gpt_shift import (F_BETA, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_MAT, I_PENDING,
                                        I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, JOINED, conn, get3, same_delta_lobe,
-                                       set3, vclass_of, _update)
+                                       set3, _update)
 from gdlearn.kernels.pathclass import pc_push
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.scene_query import intersect
@@ -100,8 +100,8 @@ def lookahead_chain(sa, mtab, hit, prim, p, ng, ns, d, seed, key, s, depth, thre
         sf, tf = coordinate_system(ns)
         wi = to_local((-d[0], -d[1], -d[2]), sf, tf, ns)
         dj = depth + j
-        wo, _, pdf, _ = bsdf_sample(mat, wi, rand(seed, key, s, dim(dj, D_LOBE)), rand(seed, key, s, dim(dj, D_BSDF_U1)),
-                                    rand(seed, key, s, dim(dj, D_BSDF_U2)))
+        wo, _, pdf, _ = bsdf_sample(mat, wi, rand(seed, key, s, dim(dj, D_LOBE)),
+                                    rand(seed, key, s, dim(dj, D_BSDF_U1)), rand(seed, key, s, dim(dj, D_BSDF_U2)))
         if not pdf > 0.0:
             return 0
         refr = wi[2] * wo[2] < 0.0
@@ -205,8 +205,9 @@ def manifold_offset(sa, mtab, k, of, oi, m, cf, ci, x_b, mat_b_o, pdf_b, thresho
         prev_pdf = pdf
     # the offset now sits on x_c, arriving from its own last chain vertex; the base gets there in m steps
     set3(of, k, F_POS, x_c)
-    set3(of, k, F_NG, (nrm[m, 0], nrm[m, 1], nrm[m, 2]))
-    set3(of, k, F_NS, (nrm[m, 3], nrm[m, 4], nrm[m, 5]))
+    # the base's own normals at x_c (the same point): the offset's shadow rays from x_c are then the base's
+    set3(of, k, F_NG, get3(cf, m, C_NG))
+    set3(of, k, F_NS, get3(cf, m, C_NS))
     set3(of, k, F_WI, (-dirs[m, 0], -dirs[m, 1], -dirs[m, 2]))
     set3(of, k, F_PREV_P, (Xo[m - 1, 0], Xo[m - 1, 1], Xo[m - 1, 2]))
     of[k, F_PREV_PDF] = prev_pdf
@@ -234,4 +235,4 @@ def same_shape(sa, prim_a, prim_b):
     return sa.prim_info[prim_a, G.INFO_SHAPE] == sa.prim_info[prim_b, G.INFO_SHAPE]
 
 
-__all__ = ["manifold_table", "lookahead_chain", "manifold_offset", "same_shape", "NCF", "NCI", "vclass_of"]
+__all__ = ["manifold_table", "lookahead_chain", "manifold_offset", "same_shape", "NCF", "NCI"]

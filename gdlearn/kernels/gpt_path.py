@@ -37,7 +37,9 @@ from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lob
                                   sampled_lobe_class, vertex_class)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.gpt_shift import (BROKEN_MANIFOLD_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, I_PENDING, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+from gdlearn.kernels.gpt_shift import (BROKEN_MANIFOLD_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, I_PENDING, VIS_UNKNOWN,
+                                       nee_at_vis)
+from gdlearn.kernels.gpt_shift import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                        I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                        I_STATE, JOINED, MERGED, FREE, conn, decide, emitted, get3,
                                        mul3, nee_at, sc3, set3, shift_direction, vclass_of, _update)
@@ -129,9 +131,10 @@ def _emission_pairs(sa, of, oi, diff, cb, mask, broken):
 
 
 @njit(cache=True, error_model="numpy")
-def _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack):
+def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, broken, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every offset by
-    reconnecting to the same light point (for a constant / directional emitter: the same direction)."""
+    reconnecting to the same light point (for a constant / directional emitter: the same direction).
+    An offset JOINED at the base's vertex sends the base's shadow ray: its known visibility ``vis`` is reused."""
     fixed_point = True
     et = int(sa.emitters[em, EM_TYPE])
     if not (et == E_AREA or et == E_POINT or et == E_SPOT):
@@ -146,8 +149,9 @@ def _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, 
                 else:
                     po = get3(of, k, F_POS)
                     qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
-                    no = nee_at(sa, em, qo, nq, po, get3(of, k, F_NG), get3(of, k, F_NS), get3(of, k, F_WI),
-                                mat_o, stack)
+                    v = vis if oi[k, I_RECONN] == JOINED else VIS_UNKNOWN
+                    no, _ = nee_at_vis(sa, em, qo, nq, po, get3(of, k, F_NG), get3(of, k, F_NS), get3(of, k, F_WI),
+                                       mat_o, stack, v)
                 co = mul3(get3(of, k, F_BETA), no)
         _pair(diff, of, oi, k, co, cb, broken)
 
@@ -267,12 +271,13 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, 
     # still see the light point's front
     em = min(int(u_sel * n_em), n_em - 1)
     nb = (0.0, 0.0, 0.0)
+    vis = VIS_UNKNOWN
     if em_b >= 0:
-        nb = nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack)
+        nb, vis = nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, VIS_UNKNOWN)
     cb = (0.0, 0.0, 0.0)
     if _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
         cb = mul3(beta, nb)
-    _nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, mask, threshold, broken, stack)
+    _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, broken, stack)
     return cb
 
 

@@ -131,19 +131,32 @@ def light_weight(sa, em, q, nq, p):
 def nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack):
     """Next-event contribution (without throughput) of light point q at a surface vertex p whose path
     arrives from wi_world: f(wi, wo) |cos| Le / pdf, MIS (power heuristic) against BSDF sampling."""
+    return nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, VIS_UNKNOWN)[0]
+
+
+#: visibility of a shadow ray already traced: unknown, occluded, visible
+VIS_UNKNOWN, VIS_OCCLUDED, VIS_VISIBLE = -1, 0, 1
+
+
+@njit(cache=True, error_model="numpy")
+def nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, vis):
+    """:func:`nee_at` that reuses a known visibility of the segment p -> q (``vis``, e.g. the base's
+    shadow ray for an offset JOINED at the base's own vertex) and returns ``(value, vis)``."""
     w_em, pdf_em, delta, dl = light_weight(sa, em, q, nq, p)
     if not (w_em[0] + w_em[1] + w_em[2] > 0.0):
-        return ZERO3
+        return ZERO3, vis
     s, t = coordinate_system(ns)
     wi = to_local(wi_world, s, t, ns)
     wo = to_local(dl, s, t, ns)
     f = bsdf_eval(mat, wi, wo)
     if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
-        return ZERO3
-    if occluded(sa, p, ng, q, stack):
-        return ZERO3
+        return ZERO3, vis
+    if vis == VIS_UNKNOWN:
+        vis = VIS_OCCLUDED if occluded(sa, p, ng, q, stack) else VIS_VISIBLE
+    if vis == VIS_OCCLUDED:
+        return ZERO3, vis
     w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
-    return sc3(mul3(f, w_em), w)
+    return sc3(mul3(f, w_em), w), vis
 
 
 @njit(cache=True, error_model="numpy", inline="always")
