@@ -44,7 +44,7 @@ from ..shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_REC
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from ..shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
 from .base import PassResult
-from .pt import PathTracer
+from .pt import PathTracer, compile_by_tracing
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py) *and* whose deliberately broken variants fail them
 SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection")
@@ -201,14 +201,7 @@ class GradientPathTracer(PathTracer):
         return out, stats.sum(axis=0), int(bad.sum())
 
     def compile(self) -> float:
-        t0 = time.perf_counter()
-        h, w = self.height, self.width
-        self.height, self.width = 2, 2
-        try:
-            self.trace(0, 1)
-        finally:
-            self.height, self.width = h, w
-        return time.perf_counter() - t0
+        return compile_by_tracing(self)
 
     def render_pass(self, pass_index: int) -> PassResult:
         t0 = time.perf_counter()

@@ -104,6 +104,19 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
         bad[y] = nbad
 
 
+def compile_by_tracing(integ) -> float:
+    """JIT-compile an integrator whose kernels run through ``integ.trace(sample0, spp)``: trace one
+    sample of a 2 x 2 image (a tiny image compiles the same kernel types as any size); returns seconds."""
+    t0 = time.perf_counter()
+    h, w = integ.height, integ.width
+    integ.height, integ.width = 2, 2
+    try:
+        integ.trace(0, 1)
+    finally:
+        integ.height, integ.width = h, w
+    return time.perf_counter() - t0
+
+
 class PathTracer(ProgressiveIntegrator):
     """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None)``.
 
