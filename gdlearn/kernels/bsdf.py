@@ -27,8 +27,8 @@ from gdlearn.kernels.bsdf_dielectric import (dielectric_sample, roughdielectric_
                                              roughdielectric_sample)
 from gdlearn.kernels.bsdf_diffuse import diffuse_eval, diffuse_pdf, diffuse_sample
 from gdlearn.kernels.bsdf_plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plastic_pdf, plastic_sample,
-                                          prepare_plastic, roughplastic_eval, roughplastic_pdf,
-                                          roughplastic_sample, roughplastic_spec_prob)
+                                          prepare_plastic, roughplastic_coat_fraction, roughplastic_eval,
+                                          roughplastic_pdf, roughplastic_sample, roughplastic_spec_prob)
 
 ZERO3 = (0.0, 0.0, 0.0)
 
@@ -195,6 +195,40 @@ def sampled_lobe_class(mat, wi, u_lobe, is_delta, threshold):
     if u_lobe < roughplastic_spec_prob(mat, cos_i):
         return L.V_GLOSSY if mat[L.MAT_ALPHA] >= threshold else L.V_SPECULAR
     return L.V_DIFFUSE
+
+
+@njit(cache=True)
+def nee_classes(mat, threshold):
+    """(class of the coating part, class of the rest) of a next-event term at this material.
+
+    Only a rough plastic has two non-delta lobes of different classes (coating V_GLOSSY, or
+    V_SPECULAR below the threshold, over a V_DIFFUSE base); every other material returns its
+    :func:`vertex_class` twice. See :func:`nee_class_share`."""
+    c = vertex_class(mat, threshold)
+    if int(mat[L.MAT_TYPE]) != L.ROUGHPLASTIC:
+        return c, c
+    return (L.V_GLOSSY if mat[L.MAT_ALPHA] >= threshold else L.V_SPECULAR), c
+
+
+@njit(cache=True)
+def nee_class_share(mat, wi, wo, want_coat, want_rest):
+    """The share of a next-event term f(wi, wo) that belongs to the wanted effect classes.
+
+    ``want_coat`` / ``want_rest``: does the effects mask keep the path when this vertex is of the
+    first / second class of :func:`nee_classes`? A rough plastic's term is split by
+    :func:`bsdf_plastic.roughplastic_coat_fraction`, the partition :func:`sampled_lobe_class`
+    realises for BSDF samples (so NEE and BSDF sampling, MIS-combined, estimate the same per-class
+    image and the per-effect images still sum to the full one). 1 or 0 for every other material."""
+    if want_coat and want_rest:
+        return 1.0
+    if not (want_coat or want_rest):
+        return 0.0
+    if int(mat[L.MAT_TYPE]) != L.ROUGHPLASTIC:
+        return 1.0                      # one class: both flags are equal, so this is unreachable
+    if _flips(mat, wi):
+        wi, wo = (wi[0], wi[1], -wi[2]), (wo[0], wo[1], -wo[2])
+    k = roughplastic_coat_fraction(mat, wi, wo)
+    return k if want_coat else 1.0 - k
 
 
 # --- building rows (Python, once per material) -----------------------------------------------------

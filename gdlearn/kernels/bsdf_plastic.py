@@ -142,18 +142,40 @@ def roughplastic_eval(mat, wi, wo):
             mat[MAT_SR + 2] * spec + a[2] * s)
 
 
-@njit(cache=True)
-def roughplastic_pdf(mat, wi, wo):
+@njit(cache=True, inline="always")
+def _roughplastic_pdf_parts(mat, wi, wo):
+    """(coating, base) parts of roughplastic_pdf, lobe-selection probabilities included."""
     cos_i, cos_o = wi[2], wo[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
-        return 0.0
+        return 0.0, 0.0
     dist, alpha = int(mat[MAT_DIST]), mat[MAT_ALPHA]
     p_spec = roughplastic_spec_prob(mat, cos_i)
     hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
     n = math.sqrt(hx * hx + hy * hy + hz * hz)
     h = (hx / n, hy / n, hz / n)
     spec = mf_D(dist, alpha, h) * mf_G1(dist, alpha, wi, h) / (4.0 * cos_i)
-    return spec * p_spec + (1.0 - p_spec) * cos_o / math.pi
+    return spec * p_spec, (1.0 - p_spec) * cos_o / math.pi
+
+
+@njit(cache=True)
+def roughplastic_pdf(mat, wi, wo):
+    coat, base = _roughplastic_pdf_parts(mat, wi, wo)
+    return coat + base
+
+
+@njit(cache=True)
+def roughplastic_coat_fraction(mat, wi, wo):
+    """The share of roughplastic_pdf(wi, wo) that comes from the microfacet coating: the posterior
+    probability that roughplastic_sample picked the coating, given that it produced wo.
+
+    Effects-restricted renders split a rough plastic's next-event term by this share (coating part
+    -> glossy class, the rest -> diffuse), the same partition the sampled lobe realises for BSDF
+    samples, so both MIS strategies estimate the same per-class integrand. 0 where the pdf is 0."""
+    coat, base = _roughplastic_pdf_parts(mat, wi, wo)
+    total = coat + base
+    if not total > 0.0:
+        return 0.0
+    return coat / total
 
 
 @njit(cache=True)

@@ -23,7 +23,7 @@ import math
 from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
-                   sampled_lobe_class, vertex_class)
+                   nee_class_share, nee_classes, sampled_lobe_class)
 from .bvh import closest_hit
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
@@ -46,8 +46,11 @@ def dim(bounce, k):
 
 
 @njit(cache=True, error_model="numpy")
-def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
-    """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput)."""
+def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, want_coat=True, want_rest=True):
+    """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput).
+
+    ``want_coat`` / ``want_rest``: which of the vertex's :func:`bsdf.nee_classes` the effects mask
+    keeps; a rough plastic's term is split between them by :func:`bsdf.nee_class_share`."""
     s, t, n = ns_frame
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
@@ -62,6 +65,7 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack):
     if occluded(sa, p, ng, q, stack):
         return (0.0, 0.0, 0.0)
     w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+    w *= nee_class_share(mat, wi, wo, want_coat, want_rest)
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 
 
@@ -117,8 +121,11 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         s, tt = coordinate_system(ns)
         wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
         null = bsdf_is_null(mat)
-        if not bsdf_is_delta_only(mat) and _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
-            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack)
+        c_coat, c_rest = nee_classes(mat, threshold)
+        want_coat = _wanted(mask, pc_push(state, c_coat))
+        want_rest = _wanted(mask, pc_push(state, c_rest))
+        if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
+            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack, want_coat, want_rest)
             L0 += beta[0] * c[0]
             L1 += beta[1] * c[1]
             L2 += beta[2] * c[2]

@@ -28,7 +28,7 @@ import math
 from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
-                   sampled_lobe_class, vertex_class)
+                   nee_class_share, nee_classes, sampled_lobe_class)
 from .bvh import closest_hit
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
@@ -198,12 +198,16 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
             break
         s, tt = coordinate_system(ns)
         wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
-        if not bsdf_is_delta_only(mat) and _wanted(mask, pc_push(state, vertex_class(mat, threshold))):
+        c_coat, c_rest = nee_classes(mat, threshold)
+        want_coat = _wanted(mask, pc_push(state, c_coat))
+        want_rest = _wanted(mask, pc_push(state, c_rest))
+        if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
             em2, dl, wl, pdf_em, delta = nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack)
             if em2 >= 0:
                 wo = to_local(dl, s, tt, ns)
                 f = bsdf_eval(mat, wi, wo)
                 k = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+                k *= nee_class_share(mat, wi, wo, want_coat, want_rest)   # a rough plastic's split
                 L = (L[0] + beta[0] * f[0] * wl[0] * k, L[1] + beta[1] * f[1] * wl[1] * k,
                      L[2] + beta[2] * f[2] * wl[2] * k)
         u_lobe = rand(seed, key, sample, dim(seg, D_LOBE))
