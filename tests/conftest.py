@@ -59,6 +59,36 @@ def pytest_generate_tests(metafunc):
         metafunc.parametrize("chapter", chapters, ids=[str(p.relative_to(ROOT)) for p in chapters])
 
 
+@pytest.fixture(scope="session")
+def quick_book_cache(tmp_path_factory) -> Path:
+    """A jupyter-cache folder for this test session's quick-mode executions.
+
+    The quick-mode book build (tests/test_book_build.py, collected first) executes every chapter and
+    stores the executed notebooks here; the chapter tests then check those outputs instead of running
+    each chapter a second time (:func:`executed_by_book_build`). Run on their own, the chapter tests
+    find the folder empty and execute the chapters themselves."""
+    return tmp_path_factory.mktemp("quick_jupyter_cache")
+
+
+def executed_by_book_build(path: Path, cache_dir: Path):
+    """The notebook of chapter ``path`` with the outputs the quick-mode book build produced, or None
+    when that build did not run (or did not finish this chapter) in this session.
+
+    The match is jupyter-cache's own: a hash of the code cells and the kernelspec, which myst-nb
+    (the build) and jupytext (:func:`execute_chapter`) read identically from a MyST chapter."""
+    import jupytext
+    from jupyter_cache import get_cache
+
+    if not (Path(cache_dir) / "global.db").is_file():
+        return None
+    cache = get_cache(str(cache_dir))
+    try:
+        record = cache.match_cache_notebook(jupytext.read(path))
+    except KeyError:
+        return None
+    return cache.get_cache_bundle(record.pk).nb
+
+
 def execute_chapter(path: Path, quick: bool = True):
     """Execute one chapter like the book build does (cwd book/, gdlearn importable); return
     (notebook with outputs, wall seconds). Raises nbclient's CellExecutionError on a failing cell."""

@@ -2,8 +2,9 @@
 fails), in quick mode, and -- when Debian's chromium is installed -- the built pages show typeset
 formulas and rendered widgets with every non-loopback host unreachable (scripts/check_offline.py).
 
-The build goes to a temporary folder with execution forced, so it neither uses nor disturbs the
-reader's _build/ and its execution cache.
+The build goes to a temporary folder with a fresh, session-wide jupyter cache (conftest's
+``quick_book_cache``), so it neither uses nor disturbs the reader's _build/ and its execution cache,
+and the chapter tests collected after it reuse its executions instead of running every chapter twice.
 """
 import importlib.util
 import os
@@ -18,11 +19,11 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
-def built_book(tmp_path_factory):
+def built_book(tmp_path_factory, quick_book_cache):
     out = tmp_path_factory.mktemp("book")
     config = yaml.safe_load((ROOT / "_config.yml").read_text())
-    config["execute"]["execute_notebooks"] = "force"
-    config["execute"].pop("cache", None)
+    config["execute"]["execute_notebooks"] = "cache"      # the cache starts empty: every chapter runs
+    config["execute"]["cache"] = str(quick_book_cache)
     # sort_keys=False: nb_ipywidgets_js is ordered (require.js must load before embed-amd.js)
     (out / "_config.yml").write_text(yaml.safe_dump(config, sort_keys=False))
     env = dict(os.environ, GDLEARN_QUICK="1")
