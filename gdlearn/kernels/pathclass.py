@@ -25,7 +25,12 @@ MULTIPLE_SCATTERING      >= 2 interior vertices, at least one in a medium, not a
 VOLUME_CAUSTICS          L S+ M ... E: specular vertices from the light, then a medium vertex
 =======================  ========================================================================
 
-Every path with interior vertices in {D, G, S, M} falls in exactly one class. Since the light end
+Every path with interior vertices in {D, G, S, M} falls in exactly one class. A vertex on a
+material with lobes of two classes (a plastic: delta or microfacet coating over a diffuse base) is
+of the class of the lobe that produced the next direction. For BSDF samples that is the sampled lobe;
+a next-event term, which no lobe produced, is split by each lobe's posterior probability of having
+produced its direction (:func:`gdlearn.kernels.bsdf.nee_class_share`), so the two MIS strategies
+estimate the same per-class image and the classes still sum to the full one. Since the light end
 is reached last, the state tracks: the number of interior vertices, which vertex classes occurred,
 the length of the current trailing run of specular vertices and the class of the last non-specular
 vertex (the vertex just before that run). Packed in one int64 (counts saturate at 0xFFFF)::
