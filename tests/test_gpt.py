@@ -201,8 +201,7 @@ def test_bad_options_are_clear_errors():
     sc = _scene("cornell-box")
     with pytest.raises(ValueError, match="unknown shift policy"):
         make("gpt", sc, shift="teleport")
-    with pytest.raises(ValueError, match="not supported"):
-        make("gpt", sc, shift="halfvector+reconnection+manifold")     # experimental only
+    assert not make("gpt", sc, shift="halfvector+reconnection+manifold").manifold   # no specular chain here
     fog = load(f"{ROOT}/scenes/fog-box.xml", res=RES)
     with pytest.raises(ValueError, match="manifold exploration is not implemented in media"):
         make("gpt", fog, shift="halfvector+reconnection+manifold", experimental=True)
@@ -214,3 +213,21 @@ def test_media_dispatch_to_the_volume_kernel():
     from gdlearn.integrators.gpt import gpt_rows
     assert make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES)).kernel is gpt_volume_rows
     assert make("gpt", _scene("cornell-box")).kernel is gpt_rows
+
+
+def test_default_policy_follows_the_effects_plan():
+    """shift=None: manifold exploration where the plan renders caustics through specular chains (and the
+    scene has analytic specular shapes, no media), halfvector+reconnection elsewhere; the CLI offers
+    every supported policy."""
+    from gdlearn.commands.render import SHIFT_CHOICES
+    from gdlearn.integrators.gpt import DEFAULT_POLICY, MANIFOLD_POLICY, SUPPORTED
+    assert SHIFT_CHOICES == SUPPORTED and MANIFOLD_POLICY in SUPPORTED
+    caustics = _scene("caustics-box")
+    g = make("gpt", caustics)
+    assert g.shift == MANIFOLD_POLICY and g.manifold
+    # asking for direct light only renders no caustic: no manifold code
+    g = make("gpt", caustics, effects="direct")
+    assert g.shift == DEFAULT_POLICY and not g.manifold
+    assert make("gpt", _scene("cornell-box")).shift == DEFAULT_POLICY
+    assert make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES)).shift == DEFAULT_POLICY
+    assert make("gpt", caustics, shift="replay").shift == "replay"

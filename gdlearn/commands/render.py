@@ -14,6 +14,10 @@ import os
 import sys
 import time
 
+#: ``--shift`` choices: gdlearn.integrators.gpt.SUPPORTED, spelled out so the parser imports no kernels
+#: (tests/test_gpt.py checks that the two agree)
+SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("render", help="render a scene file to an image",
@@ -33,9 +37,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--recon", default="none", choices=("none", "cv", "cv-weighted", "l2", "l1"),
                    help="gradient integrators: write the image reconstructed by this solver to --out "
                         "(default none: the primal image)")
-    p.add_argument("--shift", default=None, metavar="POLICY",
-                   help="gpt only: shift-mapping policy (replay, replay+reconnection, "
-                        "halfvector+reconnection; default: the integrator's best)")
+    p.add_argument("--shift", default=None, choices=SHIFT_CHOICES, metavar="POLICY",
+                   help="gpt only: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
+                        "manifold exploration where the effects plan has specular chains, else "
+                        "halfvector+reconnection)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -13,14 +13,17 @@ estimates the pixel value twice, from the base path in p and from the offset pat
 the neighbour, with the same Eq. 17 weights. ``images["primal"]`` is that estimate;
 ``images["primal_base"]`` is the base radiance alone (``pt``'s estimator, same random numbers).
 
-Policies shipped: ``replay+reconnection`` and ``halfvector+reconnection`` (the default, Kettunen et
-al.'s and the STAR Fig. 5's best), plus ``replay`` (the same as ``gpt-replay`` with MIS weights,
-which reduce to 1/2 for replay). ``halfvector+reconnection+manifold`` (manifold exploration of
-specular chains between connectable vertices, :mod:`gdlearn.kernels.gpt_manifold`) is experimental:
-``make("gpt", scene, shift=..., experimental=True)``. It runs only where the effects plan has specular
-chains and the scene has analytic specular shapes (``self.manifold``); elsewhere it is
-halfvector+reconnection. Scenes with media or null interfaces run the twin kernel
-:func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same signature and buffers), imported lazily.
+Policies (``shift=``): ``replay`` (the whole path replayed, :mod:`gdlearn.kernels.gpt_replay_policy`:
+``gpt-replay``'s estimator, Eq. 17 weights 1/2), ``replay+reconnection``, ``halfvector+reconnection``
+(Kettunen et al.'s) and ``halfvector+reconnection+manifold`` (manifold exploration of specular chains
+between connectable vertices, :mod:`gdlearn.kernels.gpt_manifold`). The manifold walk runs only where
+the effects plan has specular chains and the scene has analytic specular shapes (``self.manifold``);
+elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy`,
+manifold exploration where the plan renders caustics and the walk can run (no media),
+halfvector+reconnection elsewhere -- at equal samples the lowest gradient error of the path-space policies on each of the
+benchmark scenes (numbers in :data:`DEFAULT_POLICY`'s comment). Scenes with media or null interfaces
+run the twin kernel :func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same signature and buffers),
+imported lazily; it has no manifold walk.
 
 Frame stats: ``paths``, ``nonfinite_samples`` and, per shift action, ``shift_<action>_{run,ok,failed}``
 (actions: replay, halfvector, reconnection, manifold, fail) counted over offset path segments.
@@ -36,22 +39,31 @@ from numba import njit, prange
 from ..kernels.bvh import STACK_SIZE
 from ..kernels.gpt_path import gpt_sample
 from ..kernels.gpt_manifold import NCF, NCI, manifold_table
+from ..kernels.gpt_replay_policy import replay_sample
 from ..kernels.gpt_shift import NF, NI
 from ..kernels.rng import rand
 from ..scene.compile import borrowed
 from ..shifts.manifold import SH_WIDTH
-from ..shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION,
+from ..shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION, POLICY_REPLAY,
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from ..shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
 from .base import PassResult
 from .pt import PathTracer, compile_by_tracing
 
-#: policies whose unbiasedness tests pass (tests/test_gpt.py) *and* whose deliberately broken variants fail them
-SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection")
-#: wired in and unbiased in tests/test_gpt_manifold.py, but its broken variant (Jacobian 1) is not yet
-#: caught by the test: selectable only with ``experimental=True``
-EXPERIMENTAL = ("halfvector+reconnection+manifold",)
+#: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
+#: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
+SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+#: none left; ``experimental=True`` is still accepted (and ignored) for old callers
+EXPERIMENTAL = ()
+#: the default where no specular chain can be moved (Kettunen et al.'s policy; on diffuse scenes it
+#: runs the same reconnections as replay+reconnection). Where the walk runs, MANIFOLD_POLICY has the
+#: lowest gradient relMSE of the path-space policies at equal samples (24^2, 16 spp, 6 seeds, mean +-
+#: stderr, 2026-11-22): caustics box 0.50 +- 0.17 against 0.63 +- 0.15 (halfvector+reconnection) and
+#: 0.61 +- 0.12 (replay+reconnection); close-up caustic 7.2 +- 2.5 against 22.7 +- 2.5 and 20.7 +- 2.5.
+#: Whole-path replay, which cannot fail, was 0.43 +- 0.03 and 10.4 +- 1.1 there (book/gpt.md discusses
+#: when it wins); benchmarks/bench_gpt.py measures all of them.
 DEFAULT_POLICY = "halfvector+reconnection"
+MANIFOLD_POLICY = "halfvector+reconnection+manifold"
 
 
 @njit(cache=True, error_model="numpy")
@@ -94,8 +106,12 @@ def _gpt_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, thresho
             acc[:] = 0.0
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                c = gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
-                               threshold, of, oi, diff, st, stack, mtab, cf, ci, broken)
+                if policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
+                    c = replay_sample(sa, False, fx, fy, x, y, w, h, seed, key, s, max_depth, rr_depth, mask,
+                                      threshold, diff, st, stack, broken)
+                else:
+                    c = gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
+                                   threshold, of, oi, diff, st, stack, mtab, cf, ci, broken)
                 if not (np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]) and np.all(np.isfinite(diff))):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                     continue
@@ -146,16 +162,33 @@ def _volume_kernel():
     return gpt_volume_rows
 
 
+def _has_null_or_media(integ) -> bool:
+    return bool(integ.media) or any(s.bsdf is not None and s.bsdf.type == "null" for s in integ.scene.shapes)
+
+
+def default_policy(integ) -> str:
+    """The policy ``shift=None`` picks for a constructed PathTracer ``integ`` (its scene, plan and compiled
+    arrays): :data:`MANIFOLD_POLICY` where the effects plan renders caustics through specular chains,
+    the scene has no media and at least one analytic specular shape the walk can move, else
+    :data:`DEFAULT_POLICY`. The plan decides: ``--effects direct`` on a caustic scene renders no
+    caustic, so no manifold code runs."""
+    if integ.plan.specular_chains and "caustics" in integ.plan.names and not _has_null_or_media(integ):
+        if np.any(manifold_table(integ.scene, integ.sa)[:, 0] >= 0.0):
+            return MANIFOLD_POLICY
+    return DEFAULT_POLICY
+
+
 class GradientPathTracer(PathTracer):
-    """``make("gpt", scene, shift="halfvector+reconnection", seed=0, spp_per_pass=1, effects=None,
-    threads=None, max_depth=None)``; options as :class:`~gdlearn.integrators.pt.PathTracer` plus
-    ``shift``, the policy name (one of :data:`SUPPORTED`; :data:`EXPERIMENTAL` ones with
-    ``experimental=True``)."""
+    """``make("gpt", scene, shift=None, seed=0, spp_per_pass=1, effects=None, threads=None,
+    max_depth=None)``; options as :class:`~gdlearn.integrators.pt.PathTracer` plus ``shift``, the
+    policy name (one of :data:`SUPPORTED`; None: :func:`default_policy` for this scene and plan)."""
 
     name = "gpt"
 
-    def __init__(self, scene, *, shift: str = DEFAULT_POLICY, experimental: bool = False, **options):
+    def __init__(self, scene, *, shift: str | None = None, experimental: bool = False, **options):
         super().__init__(scene, **options)
+        if shift is None:
+            shift = default_policy(self)
         code = policy_code(shift)
         if shift not in SUPPORTED and not (experimental and shift in EXPERIMENTAL):
             raise ValueError(f"gpt: shift policy {shift!r} is not supported by this integrator yet; fix: use "
@@ -163,7 +196,7 @@ class GradientPathTracer(PathTracer):
         assert POLICIES[shift] == code
         self.shift, self.policy = shift, code
         self.kernel, self.mtab = gpt_rows, None
-        if self.media or any(s.bsdf is not None and s.bsdf.type == "null" for s in self.scene.shapes):
+        if _has_null_or_media(self):
             self.kernel = _volume_kernel()
             if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
                 raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "

@@ -56,7 +56,8 @@ from gdlearn.kernels.surface_path import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U
 from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
 from gdlearn.kernels.volume_path import MAX_SEGMENTS, next_medium, shadow_transmittance
 from gdlearn.scene.compile import borrowed
-from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, record
+from gdlearn.kernels.gpt_replay_policy import replay_sample
+from gdlearn.shifts.policy import POLICY_REPLAY, SHIFT_FAIL, SHIFT_RECONNECT, record
 
 ZERO3 = (0.0, 0.0, 0.0)
 ONE3 = (1.0, 1.0, 1.0)
@@ -377,6 +378,7 @@ def _gpt_volume_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, 
         oi = np.zeros((4, NIV), dtype=np.int64)
         diff = np.zeros((4, 3))
         summ = np.zeros((4, 3))
+        d8 = np.zeros((8, 3))
         acc = np.zeros((9, 3))
         st = stats[y]
         for x in range(w):
@@ -384,8 +386,14 @@ def _gpt_volume_rows(sa, seed, sample0, spp, policy, max_depth, rr_depth, mask, 
             acc[:] = 0.0
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                c = gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
-                                      threshold, of, oi, diff, summ, st, stack, broken)
+                if policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
+                    c = replay_sample(sa, True, fx, fy, x, y, w, h, seed, key, s, max_depth, rr_depth, mask,
+                                      threshold, d8, st, stack, broken)
+                    diff[:] = d8[:4]
+                    summ[:] = d8[4:]
+                else:
+                    c = gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask,
+                                          threshold, of, oi, diff, summ, st, stack, broken)
                 if not (np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]) and np.all(np.isfinite(diff))
                         and np.all(np.isfinite(summ))):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
