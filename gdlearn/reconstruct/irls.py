@@ -29,7 +29,7 @@ All of it runs on the padded planar layout of :mod:`.planar`.
 from __future__ import annotations
 
 import numpy as np
-from numba import prange
+from numba import get_num_threads, njit, prange
 
 from ._jit import kernel
 from .multigrid import Multigrid
@@ -39,96 +39,148 @@ __all__ = ["irls_multigrid"]
 
 
 @kernel(fastmath=True)
-def _lengths(img, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey):
-    """Colour lengths of the three residuals per pixel (padded H+2 x W+2, frame 0), validity of
-    Cv = 1 or C channels; returns (L1 energy, largest length). Squares are summed in row buffers
-    (cache-resident) so that e0 / ex / ey are written once."""
+def irls_pass(img, i0, gx, gy, alpha, v0, vx, vy, eps, full, w0, wx, wy, invd, r, nch,
+              complete):
+    """One sweep over the data from the current iterate ``img`` (padded planar float64): the L1
+    energy (Eq. 18, n = 1) and the largest residual length; with ``full``, also the IRLS weights
+    of the next reweighting ``q = eps / (|e| + eps) = 1 / (1 + |e| / eps)`` times validity
+    (alpha^2 on w0), the inverse diagonal of the reweighted operator (0 where it is 0) and the
+    residual of its normal equations ``r = W0 (I0 - x) - Dx^T Wx (Dx x - Gx) - Dy^T Wy (Dy x - Gy)``
+    in float64 (the outer residual of the iterative refinement, see the module docstring).
+
+    The weights are the reference's ``1 / (|e| + eps)`` times eps: any common factor leaves the
+    correction unchanged (A and r scale together), and this one puts them in (0, 1] without the
+    extra pass a normalisation to mean 1 needs and without any risk of float32 overflow.
+
+    The passes this replaces (lengths, weight sum, weights, residual, diagonal) each read the
+    full-resolution data; here each row is read once (``nch`` chunks of rows, each with its own
+    row buffers). Row y needs the weight of the edge above
+    it, (y-1)-(y), which row y-1 writes: it is recomputed from the same data instead (rows are
+    independent, so the loop stays parallel). Outputs are written on the interior only: their
+    frames must be 0 (they are allocated zeroed once). Returns (energy, largest length)."""
     c, hp, wp = img.shape
-    cv = v0.shape[0]
     rows = np.zeros((hp, 2))
-    for y in prange(1, hp - 1):
-        s0 = np.zeros(wp)
-        sx = np.zeros(wp)
-        sy = np.zeros(wp)
-        for k in range(c):
-            kv = k if cv > 1 else 0
-            for x in range(1, wp - 1):
-                ic = img[k, y, x]
-                d0 = alpha * (ic - i0[k, y, x])
-                dx = img[k, y, x + 1] - ic - gx[k, y, x]
-                dy = img[k, y + 1, x] - ic - gy[k, y, x]
-                s0[x] += v0[kv, y, x] * d0 * d0
-                sx[x] += vx[kv, y, x] * dx * dx
-                sy[x] += vy[kv, y, x] * dy * dy
-        tot = 0.0
-        big = 0.0
-        for x in range(1, wp - 1):
-            a, b, d = np.sqrt(s0[x]), np.sqrt(sx[x]), np.sqrt(sy[x])
-            e0[y, x] = a
-            ex[y, x] = b
-            ey[y, x] = d
-            tot += a + b + d
-            big = max(big, max(a, max(b, d)))
-        rows[y, 0] = tot
-        rows[y, 1] = big
+    # row buffers are made once per chunk of rows (nch chunks): made per row they cost as much
+    # as the sweep
+    nch = max(1, min(nch, hp - 2))
+    for j in prange(nch):
+        lens = np.zeros((4, wp))        # lengths e0, ex, ey and eu (the edge above)
+        q = np.zeros((4, wp), dtype=np.float32)     # their weights
+        start = 1 + j * (hp - 2) // nch
+        for y in range(start, 1 + (j + 1) * (hp - 2) // nch):
+            # the edge above row y is row y-1's edge below: computed only at a chunk's start
+            rows[y, 0], rows[y, 1] = _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy,
+                                                  lens, full and y == start, complete)
+            if full:
+                _weights_row(y, i0, img, gx, gy, lens, q, alpha * alpha, eps, v0, vx, vy,
+                             w0, wx, wy, invd, r)
+                lens[3, :] = lens[2, :]
     return rows[:, 0].sum(), rows[:, 1].max()
 
 
-@kernel(fastmath=True)
-def _sum_inverse(e0, ex, ey, eps, qmax):
-    """sum of (1 / (e + eps)) / qmax over the defined terms (every pixel; edges with a right /
-    lower neighbour), scaled by 1 / qmax so that it cannot overflow."""
-    hp, wp = e0.shape
-    rows = np.zeros(hp)
-    for y in prange(1, hp - 1):
-        s = 0.0
-        for x in range(1, wp - 1):
-            s += 1.0 / ((e0[y, x] + eps) * qmax)
-        for x in range(1, wp - 2):
-            s += 1.0 / ((ex[y, x] + eps) * qmax)
-        if y < hp - 2:
-            for x in range(1, wp - 1):
-                s += 1.0 / ((ey[y, x] + eps) * qmax)
-        rows[y] = s
-    return rows.sum()
-
-
-@kernel(fastmath=True)
-def _fill_weights(e0, ex, ey, eps, s, a2, v0, vx, vy, w0, wx, wy):
-    """IRLS weights s / (|e| + eps) times validity (alpha^2 on w0); frame and masked terms 0."""
-    cv, hp, wp = v0.shape
-    for y in prange(hp):
-        for k in range(cv):
-            for x in range(wp):
-                w0[k, y, x] = a2 * s / (e0[y, x] + eps) * v0[k, y, x]
-                wx[k, y, x] = s / (ex[y, x] + eps) * vx[k, y, x]
-                wy[k, y, x] = s / (ey[y, x] + eps) * vy[k, y, x]
-
-
-@kernel(fastmath=True)
-def _residual(img, i0, gx, gy, w0, wx, wy, out):
-    """out = b - A img on the interior (out may be float32) and ||b||^2 per channel, with
-    b = W0 I0 + Dx^T Wx Gx + Dy^T Wy Gy."""
+@njit(cache=True, fastmath=True)
+def _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy, lens, with_eu, complete):
+    """Row y of irls_pass: colour lengths of the residuals into lens (e0, ex, ey; with
+    ``with_eu`` also eu, the edge above (y-1, x) - (y, x), else lens[3] must hold row y-1's ey
+    already); returns (sum of the row's e0, ex, ey, largest). ``complete``: the validity is
+    1 but for the masked last column of gx and last row of gy, which are zeroed after the loop
+    instead of reading three validity rows (a third fewer loads in the hottest loop)."""
     c, hp, wp = img.shape
-    cw = w0.shape[0]
-    rows = np.zeros((hp, c))
-    for y in prange(1, hp - 1):
-        for k in range(c):
-            kw = k if cw > 1 else 0
-            s = 0.0
+    cv = v0.shape[0]
+    e0, ex, ey, eu = lens[0], lens[1], lens[2], lens[3]
+    e0[:] = 0.0
+    ex[:] = 0.0
+    ey[:] = 0.0
+    if with_eu:
+        eu[:] = 0.0
+    for k in range(c):
+        kv = k if cv > 1 else 0
+        ir, iu, idn = img[k, y], img[k, y - 1], img[k, y + 1]
+        i0r, gxr, gyr, gur = i0[k, y], gx[k, y], gy[k, y], gy[k, y - 1]
+        v0r, vxr, vyr, vur = v0[kv, y], vx[kv, y], vy[kv, y], vy[kv, y - 1]
+        # 1-D row slices and loops with few stores: what lets LLVM vectorise them
+        if complete:
             for x in range(1, wp - 1):
-                ic = img[k, y, x]
-                q0, qr, ql = w0[kw, y, x], wx[kw, y, x], wx[kw, y, x - 1]
-                qd, qu = wy[kw, y, x], wy[kw, y - 1, x]
-                gr, gl, gd, gu = gx[k, y, x], gx[k, y, x - 1], gy[k, y, x], gy[k, y - 1, x]
-                r = (q0 * (i0[k, y, x] - ic) + qr * (img[k, y, x + 1] - ic - gr)
-                     - ql * (ic - img[k, y, x - 1] - gl) + qd * (img[k, y + 1, x] - ic - gd)
-                     - qu * (ic - img[k, y - 1, x] - gu))
-                b = q0 * i0[k, y, x] - qr * gr + ql * gl - qd * gd + qu * gu
-                out[k, y, x] = r
-                s += b * b
-            rows[y, k] = s
-    return rows.sum(axis=0)
+                ic = ir[x]
+                d0 = alpha * (ic - i0r[x])
+                ddx = ir[x + 1] - ic - gxr[x]
+                ddy = idn[x] - ic - gyr[x]
+                e0[x] += d0 * d0
+                ex[x] += ddx * ddx
+                ey[x] += ddy * ddy
+        else:
+            for x in range(1, wp - 1):
+                ic = ir[x]
+                d0 = alpha * (ic - i0r[x])
+                ddx = ir[x + 1] - ic - gxr[x]
+                ddy = idn[x] - ic - gyr[x]
+                e0[x] += v0r[x] * d0 * d0
+                ex[x] += vxr[x] * ddx * ddx
+                ey[x] += vyr[x] * ddy * ddy
+        if with_eu:
+            for x in range(1, wp - 1):
+                ddu = ir[x] - iu[x] - gur[x]
+                eu[x] += vur[x] * ddu * ddu
+    if complete:
+        ex[wp - 2] = 0.0
+        if y == hp - 2:
+            ey[:] = 0.0
+    for i in range(4 if with_eu else 3):
+        li = lens[i]
+        for x in range(1, wp - 1):
+            li[x] = np.sqrt(li[x])
+    tot = 0.0
+    big = 0.0
+    for x in range(1, wp - 1):
+        tot += e0[x] + ex[x] + ey[x]
+        big = max(big, max(e0[x], max(ex[x], ey[x])))
+    return tot, big
+
+
+@njit(cache=True, fastmath=True)
+def _weights_row(y, i0, img, gx, gy, lens, q, a2, eps, v0, vx, vy, w0, wx, wy, invd, r):
+    """Row y of irls_pass's weights ``1 / (1 + |e| / eps)``, inverse diagonal and residual, from
+    the lengths (e0, ex, ey, eu in lens); q: a float32 4 x (W+2) buffer with q[1, 0] = 0 (the
+    frame edge left of the first pixel). The weights are computed in float32 (they are stored
+    so anyway): twice the SIMD width of float64 divisions, and 1 + |e| / eps >= 1 cannot divide
+    by 0 whatever eps is."""
+    c, wp = img.shape[0], img.shape[2]
+    cv = v0.shape[0]
+    e0, ex, ey, eu = lens[0], lens[1], lens[2], lens[3]
+    q0, qx, qy, qu = q[0], q[1], q[2], q[3]
+    ie = 1.0 / eps
+    one = np.float32(1.0)
+    a2f = np.float32(a2)
+    for kw in range(cv):
+        v0r, vxr, vyr, vur = v0[kw, y], vx[kw, y], vy[kw, y], vy[kw, y - 1]
+        w0r, wxr, wyr, idr = w0[kw, y], wx[kw, y], wy[kw, y], invd[kw, y]
+        for x in range(1, wp - 1):      # one store per loop: more stays scalar (alias checks)
+            q0[x] = a2f * np.float32(v0r[x]) / (one + np.float32(e0[x] * ie))
+        for x in range(1, wp - 1):
+            qx[x] = np.float32(vxr[x]) / (one + np.float32(ex[x] * ie))
+        for x in range(1, wp - 1):
+            qy[x] = np.float32(vyr[x]) / (one + np.float32(ey[x] * ie))
+        for x in range(1, wp - 1):
+            qu[x] = np.float32(vur[x]) / (one + np.float32(eu[x] * ie))
+        for x in range(1, wp - 1):
+            w0r[x] = q0[x]
+        for x in range(1, wp - 1):
+            wxr[x] = qx[x]
+        for x in range(1, wp - 1):
+            wyr[x] = qy[x]
+        for x in range(1, wp - 1):
+            dg = q0[x] + qx[x] + qx[x - 1] + qy[x] + qu[x]
+            idr[x] = one / dg if dg > 0.0 else 0.0
+        for k in range(kw if cv > 1 else 0, kw + 1 if cv > 1 else c):
+            # the residuals are recomputed from the (cache-resident) rows: cheaper than storing
+            # them in the lengths loop
+            i0r, ir, iu, idn, rr = i0[k, y], img[k, y], img[k, y - 1], img[k, y + 1], r[k, y]
+            gxr, gyr, gur = gx[k, y], gy[k, y], gy[k, y - 1]
+            for x in range(1, wp - 1):
+                ic = ir[x]
+                rr[x] = (q0[x] * (i0r[x] - ic) + qx[x] * (ir[x + 1] - ic - gxr[x])
+                         - qx[x - 1] * (ic - ir[x - 1] - gxr[x - 1])
+                         + qy[x] * (idn[x] - ic - gyr[x]) - qu[x] * (ic - iu[x] - gur[x]))
 
 
 def planar_problem(prob):
@@ -155,25 +207,27 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
     """
     i0, gx, gy, v0, vx, vy = planar_problem(prob)
     x = to_planar(x)
-    h, w, _ = prob.shape
-    e0, ex, ey = (np.zeros((h + 2, w + 2)) for _ in range(3))
-    energy, emax = _lengths(x, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey)
-    history, inner = [energy], []
-    wts = tuple(np.empty(v0.shape, dtype=dtype) for _ in range(3))
+    wts = tuple(np.zeros(v0.shape, dtype=dtype) for _ in range(3))
+    invd = np.zeros(v0.shape, dtype=dtype)
     r = np.zeros(x.shape, dtype=dtype)
-    n_terms = h * w + h * max(w - 1, 0) + w * max(h - 1, 0)
+    data = (i0, gx, gy, alpha, v0, vx, vy)
+    nch = 4 * get_num_threads()
+    energy, emax = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete)
+    history, inner = [energy], []
     for k in range(1, irls_iterations):
         # eps = 0 (pure IRLS) must not divide by an exactly-zero residual: floor it far below the
-        # largest residual; normalising to mean weight 1 divides by the largest weight first
+        # largest residual (of the iterate before x: the pass that reads x needs eps already)
         eps = max(eps0 * eps_decay ** (k - 1), 1e-12 * emax, 1e-300)
-        qmax = 1.0 / eps
-        s = n_terms / _sum_inverse(e0, ex, ey, eps, qmax) / qmax
-        _fill_weights(e0, ex, ey, eps, s, alpha * alpha, v0, vx, vy, *wts)
-        _residual(x, i0, gx, gy, *wts, r)
-        pre = Multigrid(*wts, dtype=dtype, sweeps=sweeps)
+        # weights eps / (|e| + eps) lie in (0, 1]: any common scale gives the same correction
+        # (A and r scale together), and this one needs no extra pass and cannot overflow float32
+        energy, emax = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete)
+        if k > 1:
+            history.append(energy)
+        pre = Multigrid(*wts, dtype=dtype, sweeps=sweeps, invd0=invd)
         d, _, it = pcg_planar(r, *wts, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True)
         x += d
         inner.append(it)
-        energy, emax = _lengths(x, i0, gx, gy, alpha, v0, vx, vy, e0, ex, ey)
+    if irls_iterations > 1:
+        energy, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete)
         history.append(energy)
     return from_planar(x), history, inner

@@ -44,13 +44,13 @@ def apply_planar(p, w0, wx, wy, out):
         for k in range(c):
             kw = k if cw > 1 else 0
             s = 0.0
-            for x in range(1, wp - 1):
-                pc = p[k, y, x]
-                v = (w0[kw, y, x] * pc + wx[kw, y, x] * (pc - p[k, y, x + 1])
-                     + wx[kw, y, x - 1] * (pc - p[k, y, x - 1])
-                     + wy[kw, y, x] * (pc - p[k, y + 1, x])
-                     + wy[kw, y - 1, x] * (pc - p[k, y - 1, x]))
-                out[k, y, x] = v
+            pr, pu, pd, outr = p[k, y], p[k, y - 1], p[k, y + 1], out[k, y]
+            w0r, wxr, wyr, wyu = w0[kw, y], wx[kw, y], wy[kw, y], wy[kw, y - 1]
+            for x in range(1, wp - 1):      # 1-D row slices: simpler addressing, faster
+                pc = pr[x]
+                v = (w0r[x] * pc + wxr[x] * (pc - pr[x + 1]) + wxr[x - 1] * (pc - pr[x - 1])
+                     + wyr[x] * (pc - pd[x]) + wyu[x] * (pc - pu[x]))
+                outr[x] = v
                 s += pc * v
             rows[y, k] = s
     return rows.sum(axis=0)
@@ -117,7 +117,9 @@ def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwri
     if maxiter == 0 or history[0] <= tol:
         return d, np.asarray(history), 0
     z = precond(r)
-    p = z.copy()
+    # p may alias the preconditioner's output buffer until a second step needs z again: IRLS
+    # mostly stops after one step, and the copy is a full pass over the vectors
+    p = z if z is not r else z.copy()     # (an identity preconditioner returns r itself)
     rz = _dot(r, z)
     while True:
         pap = apply_planar(p, w0, wx, wy, ap)
@@ -128,6 +130,8 @@ def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwri
         history.append(float(np.sqrt(rr.sum())) / bnorm)
         if it >= maxiter or history[-1] <= tol:
             break
+        if p is z:
+            p = z.copy()
         z = precond(r)
         rz_new = _dot(r, z)
         beta = np.where(rz > 0.0, rz_new / np.where(rz > 0.0, rz, 1.0), 0.0)

@@ -226,7 +226,7 @@ def poisson_l2(primal, gx, gy, alpha: float = 0.2, *, weights=None, tol: float =
 def poisson_l1(primal, gx, gy, alpha: float = 0.2, *, irls_iterations: int = 20,
                eps0: float = 0.05, eps_decay: float = 0.5, cg_iterations: int = 50,
                tol: float | None = None, precond_dtype=np.float32,
-               preconditioner: str = "multigrid", mg_sweeps: int = 2) -> Reconstruction:
+               preconditioner: str = "multigrid", mg_sweeps: int = 1) -> Reconstruction:
     """Screened Poisson reconstruction with the L1 norm (Eq. 18, n = 1) by IRLS.
 
     Outer iteration 0 solves the L2 problem (exactly by DCT when the data are complete); each of
