@@ -63,6 +63,9 @@ EXPERIMENTAL = ()
 #: caustics box manifold 0.98 +- 0.1, halfvector+reconnection 0.76, replay+reconnection 0.92; close-up
 #: caustic manifold 1.37, halfvector+reconnection 0.50, replay+reconnection 0.54; Cornell box and fog
 #: halfvector+reconnection 1.08 and 1.26; mesh 0.84 (book/gpt.md discusses why replay can win).
+#: At equal time (2 s, 32^2, 2 seeds, relMSE after L1 / L2) manifold beat halfvector+reconnection on the
+#: close-up (0.98 / 0.86 against 1.56 / 1.77) but not with L1 on the caustics box (7.8e-2 against 5.8e-2;
+#: L2 0.16 against 0.17); gpt-replay + L1 beat both there.
 DEFAULT_POLICY = "halfvector+reconnection"
 MANIFOLD_POLICY = "halfvector+reconnection+manifold"
 
