@@ -204,7 +204,7 @@ def test_bad_options_are_clear_errors():
     assert not make("gpt", sc, shift="halfvector+reconnection+manifold").manifold   # no specular chain here
     fog = load(f"{ROOT}/scenes/fog-box.xml", res=RES)
     with pytest.raises(ValueError, match="manifold exploration is not implemented in media"):
-        make("gpt", fog, shift="halfvector+reconnection+manifold", experimental=True)
+        make("gpt", fog, shift="halfvector+reconnection+manifold")
 
 
 def test_media_dispatch_to_the_volume_kernel():

@@ -45,12 +45,12 @@ def _scene_fx(name, effects):
 def _run(name, broken=0, effects=None):
     if (name, broken, effects) not in _CACHE:
         if effects is None:
-            _CACHE[name, broken, effects] = _frames(_scene(name), POLICY, broken=broken, experimental=True)
+            _CACHE[name, broken, effects] = _frames(_scene(name), POLICY, broken=broken)
         else:
             frames = []
             for seed in range(N_SEEDS):
                 integ = make("gpt", _scene_fx(name, effects), seed=1000 + seed, spp_per_pass=FX_SPP[name],
-                             shift=POLICY, effects=effects, experimental=True)
+                             shift=POLICY, effects=effects)
                 integ._broken = broken
                 frames.append(render(integ, spp=FX_SPP[name]))
             _CACHE[name, broken, effects] = frames
@@ -106,7 +106,7 @@ def test_manifold_gradients_are_unbiased(name, effects):
 def test_no_manifold_code_without_specular_chains():
     """The Cornell box has no specular BSDF: the plan has no specular chains, the manifold code does
     not run, and the estimator is halfvector+reconnection's (unbiased by the same test)."""
-    integ = make("gpt", _scene("cornell-box"), shift=POLICY, experimental=True)
+    integ = make("gpt", _scene("cornell-box"), shift=POLICY)
     assert not integ.manifold
     frames = _run("cornell-box")
     assert all(f.stats["shift_manifold_run"] == 0 for f in frames)
@@ -127,8 +127,7 @@ def test_manifold_jacobian_one_fails_the_same_test():
 
 def test_manifold_stats_and_hard_cases_stay_finite():
     """Deep caustic paths (max_depth 12): images finite, nothing dropped, manifold counts consistent."""
-    f = render(make("gpt", _scene("caustics-box"), seed=11, spp_per_pass=4, max_depth=12, shift=POLICY,
-                    experimental=True), spp=8)
+    f = render(make("gpt", _scene("caustics-box"), seed=11, spp_per_pass=4, max_depth=12, shift=POLICY), spp=8)
     for name in ("primal", "primal_base", "gx", "gy"):
         assert np.all(np.isfinite(f.images[name]))
     assert f.stats["nonfinite_samples"] == 0

@@ -20,8 +20,9 @@ between connectable vertices, :mod:`gdlearn.kernels.gpt_manifold`). The manifold
 the effects plan has specular chains and the scene has analytic specular shapes (``self.manifold``);
 elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy`,
 manifold exploration where the plan renders caustics and the walk can run (no media),
-halfvector+reconnection elsewhere -- at equal samples the lowest gradient error of the path-space policies on each of the
-benchmark scenes (numbers in :data:`DEFAULT_POLICY`'s comment). Scenes with media or null interfaces
+halfvector+reconnection elsewhere: on every benchmark scene the lowest gradient error at equal samples
+among the path-space policies (numbers in :data:`DEFAULT_POLICY`'s comment; whole-path ``replay``,
+which cannot fail, is lower still on some scenes: book/gpt.md). Scenes with media or null interfaces
 run the twin kernel :func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same signature and buffers),
 imported lazily; it has no manifold walk.
 
@@ -57,11 +58,14 @@ SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfve
 EXPERIMENTAL = ()
 #: the default where no specular chain can be moved (Kettunen et al.'s policy; on diffuse scenes it
 #: runs the same reconnections as replay+reconnection). Where the walk runs, MANIFOLD_POLICY has the
-#: lowest gradient relMSE of the path-space policies at equal samples (24^2, 16 spp, 6 seeds, mean +-
-#: stderr, 2026-11-22): caustics box 0.50 +- 0.17 against 0.63 +- 0.15 (halfvector+reconnection) and
-#: 0.61 +- 0.12 (replay+reconnection); close-up caustic 7.2 +- 2.5 against 22.7 +- 2.5 and 20.7 +- 2.5.
-#: Whole-path replay, which cannot fail, was 0.43 +- 0.03 and 10.4 +- 1.1 there (book/gpt.md discusses
-#: when it wins); benchmarks/bench_gpt.py measures all of them.
+#: lowest gradient relMSE of the path-space policies at equal samples. benchmarks/bench_gpt.py, 32^2,
+#: 16 spp, 6 seeds (2026-11-22), error of whole-path replay / error of the policy (> 1: policy better):
+#: caustics box manifold 0.98 +- 0.1, halfvector+reconnection 0.76, replay+reconnection 0.92; close-up
+#: caustic manifold 1.37, halfvector+reconnection 0.50, replay+reconnection 0.54; Cornell box and fog
+#: halfvector+reconnection 1.08 and 1.26; mesh 0.84 (book/gpt.md discusses why replay can win).
+#: At equal time (2 s, 32^2, 2 seeds, relMSE after L1 / L2) manifold beat halfvector+reconnection on the
+#: close-up (0.98 / 0.86 against 1.56 / 1.77) but not with L1 on the caustics box (7.8e-2 against 5.8e-2;
+#: L2 0.16 against 0.17); gpt-replay + L1 beat both there.
 DEFAULT_POLICY = "halfvector+reconnection"
 MANIFOLD_POLICY = "halfvector+reconnection+manifold"
 
