@@ -130,8 +130,8 @@ def load_baseline(path):
     import importlib.util
     import sys
     init = os.path.join(path, "gdlearn", "reconstruct", "__init__.py")
-    spec = importlib.util.spec_from_file_location("baseline_reconstruct", init,
-                                                  submodule_search_locations=[os.path.dirname(init)])
+    spec = importlib.util.spec_from_file_location(
+        "baseline_reconstruct", init, submodule_search_locations=[os.path.dirname(init)])
     mod = importlib.util.module_from_spec(spec)
     sys.modules["baseline_reconstruct"] = mod
     spec.loader.exec_module(mod)
@@ -215,7 +215,8 @@ def main():
         row(name, t, targets.get(name), extra)
 
     if base is not None:
-        fs = {"baseline": lambda: base.poisson_l1(p, gx, gy), "current": lambda: poisson_l1(p, gx, gy)}
+        fs = {"baseline": lambda: base.poisson_l1(p, gx, gy),
+              "current": lambda: poisson_l1(p, gx, gy)}
         fs["baseline"]()
         res = interleaved(fs, max(args.repeats, 3))
         print(f"L1 defaults, interleaved (load {os.getloadavg()[0]:.1f}): "
@@ -256,7 +257,8 @@ def main():
     if base is not None:
         rb = base.poisson_l1(qp, qgx, qgy)
         err = np.sqrt(np.mean((rb.image - qimg) ** 2))
-        print(f"  baseline defaults: energy {rb.history[-1]:.7g}, ratio {rb.history[-1] / e_ref:.5f},"
+        print(f"  baseline defaults: energy {rb.history[-1]:.7g}, "
+              f"ratio {rb.history[-1] / e_ref:.5f},"
               f" RMS error {err:.4f}, CG steps {sum(rb.info['cg_iterations'])}")
 
 
