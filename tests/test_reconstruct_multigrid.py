@@ -61,7 +61,7 @@ def vcycle_matrix(mg, h, w, c):
 
 @pytest.mark.parametrize("alpha2, sweeps, smoother, sor", [
     (0.04, 1, "rbgs", 1.2), (0.04, 2, "rbgs", 1.2), (0.0, 2, "rbgs", 1.2), (0.04, 2, "jacobi", 1.2),
-    (0.04, 1, "rbgs", 1.0), (0.04, 1, "rbgs", 1.8)])
+    (0.04, 1, "rbgs", 1.0), (0.04, 1, "rbgs", 1.8), (0.04, (1, 2), "rbgs", 1.2)])
 def test_vcycle_is_spd_and_reduces_the_error(alpha2, sweeps, smoother, sor):
     """B symmetric, positive definite (semi-definite with the constant null mode when alpha = 0),
     and the eigenvalues of BA lie in (0, 2): as a stationary iteration x += B (b - A x) the V-cycle
