@@ -2,6 +2,11 @@
 
     .venv/bin/python benchmarks/bench_reconstruct.py [--width 1280 --height 720] [--repeats 3]
                                                      [--no-scipy] [--quality-size 320x180]
+                                                     [--baseline DIR]
+
+``--baseline DIR``: DIR holds an older ``gdlearn/reconstruct`` (e.g. ``git archive <commit>
+gdlearn/reconstruct | tar -x -C DIR``); its L1 defaults are timed interleaved with the current
+ones (before / after in the same run, same load) and its energy joins the quality table.
 
 Every solver runs once on a small image and once at full size first (numba JIT and caches warm),
 then ``--repeats`` times; the table shows the best wall time (the machine's 2 cores are shared, so
@@ -119,6 +124,33 @@ def reference_l1d(p, gx, gy, alpha=0.2):
     return x, l1_energy(e0, ex, ey)
 
 
+def load_baseline(path):
+    """The ``gdlearn/reconstruct`` package under ``path`` imported as ``baseline_reconstruct``
+    (its imports are relative, so it runs beside the current one)."""
+    import importlib.util
+    import sys
+    init = os.path.join(path, "gdlearn", "reconstruct", "__init__.py")
+    spec = importlib.util.spec_from_file_location(
+        "baseline_reconstruct", init, submodule_search_locations=[os.path.dirname(init)])
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["baseline_reconstruct"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def interleaved(fs, repeats):
+    """Best wall and CPU time of each callable, run in turn ``repeats`` times (so a change of load
+    hits all of them alike)."""
+    wall, cpu = {n: [] for n in fs}, {n: [] for n in fs}
+    for _ in range(repeats):
+        for n, f in fs.items():
+            t, c = time.perf_counter(), time.process_time()
+            f()
+            wall[n].append(time.perf_counter() - t)
+            cpu[n].append(time.process_time() - c)
+    return {n: (min(wall[n]), min(cpu[n])) for n in fs}
+
+
 def row(name, t, target=None, extra=""):
     """Wall time (the target's measure), CPU time of this process (all threads; on a shared
     machine it shows the work done, not the time waited for a core)."""
@@ -135,7 +167,9 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-scipy", action="store_true", help="skip the slow plain-CG comparisons")
     ap.add_argument("--quality-size", default="320x180")
+    ap.add_argument("--baseline", default=None, help="directory with an older gdlearn/reconstruct")
     args = ap.parse_args()
+    base = load_baseline(args.baseline) if args.baseline else None
     h, w = args.height, args.width
     img, p, gx, gy = test_data(h, w)
     rng = np.random.default_rng(1)
@@ -180,6 +214,16 @@ def main():
             extra += f", CG steps {res.iterations}"
         row(name, t, targets.get(name), extra)
 
+    if base is not None:
+        fs = {"baseline": lambda: base.poisson_l1(p, gx, gy),
+              "current": lambda: poisson_l1(p, gx, gy)}
+        fs["baseline"]()
+        res = interleaved(fs, max(args.repeats, 3))
+        print(f"L1 defaults, interleaved (load {os.getloadavg()[0]:.1f}): "
+              + ", ".join(f"{n} wall {t:.3f} s cpu {c:.3f} s" for n, (t, c) in res.items())
+              + f"; speed-up {res['baseline'][0] / res['current'][0]:.2f}x (wall), "
+              f"{res['baseline'][1] / res['current'][1]:.2f}x (cpu)", flush=True)
+
     if not args.no_scipy:
         t_dct = results["exact L2 (DCT)"][0]
         t, (x, its) = best(lambda: scipy_solve(p, gx, gy, 0.2), 1)
@@ -208,8 +252,14 @@ def main():
              sum(rd.info["cg_iterations"]))):
         err = np.sqrt(np.mean((x - qimg) ** 2))
         print(f"  {name:44s} energy {e:.7g}  RMS error {err:.4f}  CG steps {st:4d}  {t:.2f} s")
-    print(f"  energy ratio defaults / reference: {r.history[-1] / e_ref:.4f}, "
-          f"dct / reference: {rd.history[-1] / e_ref:.4f}")
+    print(f"  energy ratio defaults / reference: {r.history[-1] / e_ref:.5f}, "
+          f"dct / reference: {rd.history[-1] / e_ref:.5f}")
+    if base is not None:
+        rb = base.poisson_l1(qp, qgx, qgy)
+        err = np.sqrt(np.mean((rb.image - qimg) ** 2))
+        print(f"  baseline defaults: energy {rb.history[-1]:.7g}, "
+              f"ratio {rb.history[-1] / e_ref:.5f},"
+              f" RMS error {err:.4f}, CG steps {sum(rb.info['cg_iterations'])}")
 
 
 if __name__ == "__main__":

@@ -32,18 +32,22 @@ API: every solver returns a :class:`Reconstruction`
   Jacobi-scaled DCT-preconditioned CG; history: relative residual of the normal equations.
 * :func:`poisson_l1` ``(primal, gx, gy, alpha=0.2, *, irls_iterations=20, eps0=0.05,
   eps_decay=0.5, cg_iterations=50, tol=None, precond_dtype=np.float32,
-  preconditioner="multigrid", mg_sweeps=2)`` -- IRLS (the reference solver's L1D preset); each
-  reweighting solves a float32 correction by CG with a multigrid V-cycle (:mod:`.multigrid`, on
-  the padded planar layout of :mod:`.planar`, driver in :mod:`.irls`) until its residual halves
-  -- one or two steps; ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1
-  energy per reweighting.
+  preconditioner="multigrid", mg_sweeps=1)`` -- IRLS (the reference solver's L1D preset); each
+  reweighting makes its weights, diagonal and float64 residual in one pass over the data, then
+  solves a float32 correction by CG with a multigrid V-cycle (symmetric SOR smoothing,
+  :mod:`.multigrid`, on the padded planar layout of :mod:`.planar`, driver in :mod:`.irls`)
+  until its residual halves -- one or two steps; ``preconditioner="dct"`` keeps the
+  DCT-preconditioned path; history: L1 energy per reweighting.
 
-Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 threads, quiet machine, best of 3):
-exact L2 0.14 s; 50 uniform CV iterations 0.39 s (vectorised rows; 0.55 s before); weighted L2
-4.8 s (35 DCT-preconditioned CG steps); L1 defaults 1.9 s (22 multigrid-preconditioned CG steps;
-14 s with the DCT preconditioner), at 0.9998 of the energy of a 20 x 50 plain-CG emulation of the
-reference preset. What remains in L1 is a fixed cost per reweighting (residual lengths, weights,
-residual, multigrid set-up: ~85 ms x 19), not the CG steps.
+Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 threads, best of 3-4): exact L2
+0.14-0.16 s; 50 uniform CV iterations 0.36-0.39 s; weighted L2 4.8 s quiet (35 DCT-preconditioned
+CG steps); L1 defaults 1.9 s quiet before the fused IRLS pass and SOR smoothing, 1.56 s after
+(load ~2; interleaved with the older code in the same run: 1.92 s -> 1.69 s, 1.14x), 26
+multigrid-preconditioned CG steps, at 0.99977 of the energy of a 20 x 50 plain-CG emulation of
+the reference preset (0.99983 before). Still above the 1 s target: per reweighting one SOR
+V-cycle (each half-sweep computes the whole row, twice the needed arithmetic) and the IRLS pass
+(~30 ms) remain; the stencils are compute-bound here (a cache-resident image is barely faster per
+value), so fusing passes saves little and halving arithmetic (a red-black split layout) is next.
 """
 from .control_variates import CVHistory, control_variates, cv_history
 from .conventions import Reconstruction, forward_differences, variances_from_halves

@@ -6,9 +6,13 @@ Energy (Eq. 18 with n = 1, the reference solver's convention, see :mod:`.poisson
     E(I) = sum_p alpha |I_p - I0_p| + |(Dx I - Gx)_p| + |(Dy I - Gy)_p|
 
 Reweighting k (the reference solver's L1D preset): term weights ``q = 1 / (|e| + eps_k)`` from the
-current residual lengths ``e`` (normalised to mean 1), then one weighted least-squares step. How
-that step is solved is what makes this path fast:
+current residual lengths ``e`` (the reference normalises them to mean 1; any common factor gives
+the same step, here they are scaled by eps_k into (0, 1]), then one weighted least-squares step.
+How that step is solved is what makes this path fast:
 
+* **One pass per reweighting** (:func:`irls_pass`): residual lengths, L1 energy, weights, the
+  operator's inverse diagonal and the residual below come from one sweep over the data
+  (previously five passes: lengths, weight sum, weights, residual, diagonal).
 * **Correction form.** The float64 residual of the reweighted normal equations
   ``r = b - A x = W0 (I0 - x) - Dx^T Wx (Dx x - Gx) - Dy^T Wy (Dy x - Gy)`` comes from one stencil
   pass over the data; only the correction ``A d = r`` is solved, in float32 (half the memory
@@ -19,7 +23,8 @@ that step is solved is what makes this path fast:
   memory). Missing (non-finite) input makes them per channel (weight 0 where missing).
 * **Multigrid preconditioner** (:class:`.multigrid.Multigrid`) built on the actual weights, which
   span up to ``1 / eps`` (1e7 by the last reweighting) -- where the DCT solve of the mean weight
-  needs tens of CG steps, the V-cycle needs a few.
+  needs tens of CG steps, the V-cycle needs a few; one symmetric-SOR sweep (omega 1.2) before
+  and after each coarse correction.
 * **Stopping rule per reweighting**: CG stops when the correction's residual has dropped by
   ``tol`` relative to its start (not relative to ``b``: the start of a warm-started reweighting
   is already close, and a tolerance relative to ``b`` stops after zero steps once eps is small).
@@ -201,7 +206,8 @@ def planar_problem(prob):
 
 def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iterations, tol,
                    dtype=np.float32, sweeps=1):
-    """Reweightings 1 .. irls_iterations - 1 from the L2 start ``x`` (H x W x C float64).
+    """Reweightings 1 .. irls_iterations - 1 from the L2 start ``x`` (H x W x C float64);
+    ``sweeps``: the V-cycle's smoothing sweeps (see :class:`.multigrid.Multigrid`).
 
     Returns (x H x W x C, L1 energy per outer iteration incl. the start, CG steps per reweighting).
     """

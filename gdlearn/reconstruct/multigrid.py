@@ -16,14 +16,17 @@ over-estimates the coarse Laplacian by 2 for smooth errors; factor 1/2 re-discre
 coarse cells (cell-centred multigrid, Wesseling 1992, Ch. 5). The coarsest grid
 (<= ``COARSEST_CELLS`` cells) is solved by a dense pseudo-inverse.
 
-**Smoothers.** Red-black Gauss-Seidel (default): red then black before the coarse correction,
-black then red after it -- the post-smoother is the adjoint of the pre-smoother. Or damped Jacobi
-(``omega = 0.8``, symmetric, the same sweeps before and after); per CG step it is cheaper but
-weaker (measured on the 320 x 180 benchmark problem: 2 Jacobi sweeps reach a worse L1 energy than
-1 Gauss-Seidel sweep). Either smoother S satisfies ``S + S^T - A`` positive definite (A is
-diagonally dominant), so the V-cycle ``B`` is symmetric positive semi-definite, definite when A
-is -- what CG needs of a preconditioner (tests/test_reconstruct_multigrid.py checks it, and that
-the eigenvalues of BA lie in (0, 2): each cycle contracts the error).
+**Smoothers.** Red-black symmetric SOR (default): red then black before the coarse correction,
+black then red after it -- the post-smoother is the adjoint of the pre-smoother -- each point
+moved ``sor`` (default ``SOR_OMEGA = 1.2``) times its Gauss-Seidel update. Over-relaxation makes
+one sweep worth more than two plain Gauss-Seidel sweeps here (see ``SOR_OMEGA``), so the IRLS
+default is one sweep. Or damped Jacobi (``omega = 0.8``, symmetric, the same sweeps before and
+after); per CG step it is cheaper but weaker (measured on the 320 x 180 benchmark problem: 2
+Jacobi sweeps reach a worse L1 energy than 1 Gauss-Seidel sweep). Either smoother S satisfies
+``S + S^T - A`` positive definite (for SOR it is ``(2 / sor - 1) D``), so the V-cycle ``B`` is
+symmetric positive semi-definite, definite when A is -- what CG needs of a preconditioner
+(tests/test_reconstruct_multigrid.py checks it, and that the eigenvalues of BA lie in (0, 2) up
+to sor = 1.2: each cycle contracts the error).
 """
 from __future__ import annotations
 
@@ -72,7 +75,8 @@ CHUNKS = 16
 
 @kernel(fastmath=True)
 def _rb_sweep(z, b, w0, wx, wy, invd, colour, om):
-    """Gauss-Seidel, in place, on the pixels with (x + y) % 2 == colour: their four neighbours
+    """SOR (``om`` x the Gauss-Seidel step; om = 1: Gauss-Seidel), in place, on the pixels with
+    (x + y) % 2 == colour: their four neighbours
     have the other colour, so the rows are independent (parallel) and the result is the same in
     any order. The update is computed for the whole row into a buffer (a contiguous loop LLVM
     vectorises; twice the arithmetic, but a strided loop is no faster) and stored every 2nd.
@@ -104,9 +108,11 @@ def _rb_first(z, b, invd, om):
     for y in prange(1, hp - 1):
         for k in range(c):
             kw = k if cw > 1 else 0
+            zr, br, idr = z[k, y], b[k, y], invd[kw, y]
             for x in range(1, wp - 1):
-                v = om * b[k, y, x] * invd[kw, y, x]
-                z[k, y, x] = v if (x + y) % 2 == 0 else 0.0
+                zr[x] = om * br[x] * idr[x]
+            for x in range(1 + y % 2, wp - 1, 2):   # colour 1: (x + y) odd
+                zr[x] = 0.0
 
 
 @kernel(fastmath=True)
@@ -156,8 +162,9 @@ def _prolong_add(z, ec):
     c, hp, wp = z.shape
     for y in prange(1, hp - 1):
         for k in range(c):
+            zr, er = z[k, y], ec[k, (y + 1) // 2]
             for x in range(1, wp - 1):
-                z[k, y, x] += ec[k, (y + 1) // 2, (x + 1) // 2]
+                zr[x] += er[(x + 1) // 2]
 
 
 @kernel
@@ -221,7 +228,9 @@ class Multigrid:
 
     ``w0, wx, wy``: Cw x (H+2) x (W+2), frame and masked edges 0. ``dtype`` of the vectors and
     weights of every level (float32 halves the memory traffic; the preconditioner's own error is
-    far above float32 round-off). ``sweeps``: smoothing sweeps before and after each correction;
+    far above float32 round-off). ``sweeps``: smoothing sweeps before and after each correction
+    (an int, or one per level, the last repeated for coarser ones); ``sor``: over-relaxation of
+    the red-black sweeps, in (0, 2);
     ``smoother``: "rbgs" (red-black Gauss-Seidel) or "jacobi" (damped by ``omega``). The
     returned z lives in a buffer reused by the next call (copy it to keep it). ``invd0``: the
     finest level's inverse diagonal if the caller has it already (as the IRLS pass computes it).

@@ -64,8 +64,9 @@ def _dot(a, b):
     for y in prange(hp):
         for k in range(c):
             s = 0.0
+            ar, br = a[k, y], b[k, y]
             for x in range(wp):
-                s += a[k, y, x] * b[k, y, x]
+                s += ar[x] * br[x]
             rows[y, k] = s
     return rows.sum(axis=0)
 
@@ -79,10 +80,12 @@ def _update(x, r, p, ap, a):
         for k in range(c):
             ak = a[k]
             s = 0.0
+            xr, rr, pr, apr = x[k, y], r[k, y], p[k, y], ap[k, y]
             for i in range(wp):
-                x[k, y, i] += ak * p[k, y, i]
-                rv = r[k, y, i] - ak * ap[k, y, i]
-                r[k, y, i] = rv
+                xr[i] += ak * pr[i]
+            for i in range(wp):
+                rv = rr[i] - ak * apr[i]
+                rr[i] = rv
                 s += rv * rv
             rows[y, k] = s
     return rows.sum(axis=0)
@@ -95,8 +98,9 @@ def _direction(p, z, beta):
     for y in prange(hp):
         for k in range(c):
             bk = beta[k]
+            pr, zr = p[k, y], z[k, y]
             for i in range(wp):
-                p[k, y, i] = z[k, y, i] + bk * p[k, y, i]
+                pr[i] = zr[i] + bk * pr[i]
 
 
 def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False):

@@ -231,11 +231,13 @@ def poisson_l1(primal, gx, gy, alpha: float = 0.2, *, irls_iterations: int = 20,
 
     Outer iteration 0 solves the L2 problem (exactly by DCT when the data are complete); each of
     the next ``irls_iterations - 1`` reweights every term by ``1 / (|e| + eps)`` (colour length of
-    its residual, normalised to mean 1 as in the reference solver), eps = eps0 * eps_decay^(k-1),
+    its residual; normalised to mean 1 as in the reference solver on the DCT path, scaled by eps on
+    the multigrid path -- the same step), eps = eps0 * eps_decay^(k-1),
     and runs preconditioned CG from the current image for at most ``cg_iterations`` steps.
 
     ``preconditioner="multigrid"`` (default, :mod:`.irls`): CG on the float32 correction with a
-    V-cycle of ``mg_sweeps`` red-black Gauss-Seidel sweeps (:mod:`.multigrid`), stopped when the
+    V-cycle of ``mg_sweeps`` red-black symmetric-SOR sweeps (omega 1.2, :mod:`.multigrid`; an
+    int or one per level), stopped when the
     residual has dropped to ``tol`` (default 0.5) times its value at the start of the
     reweighting -- typically one or two steps; ``precond_dtype`` (float32 by default) is the
     precision of that correction solve, the outer residual stays float64. ``preconditioner="dct"``:
@@ -247,7 +249,8 @@ def poisson_l1(primal, gx, gy, alpha: float = 0.2, *, irls_iterations: int = 20,
     CG steps each); equivalence is judged by the energy and error reached, not the step count.
     Measured on the 320 x 180 test of benchmarks/bench_reconstruct.py (1 % gradient outliers):
     the L1D emulation (20 x 50 plain CG) ends at energy 27916, RMS error 0.073; the multigrid
-    default at 27912 (22 CG steps in all), RMS error 0.029; the DCT path at 28026 (+0.4 %), 0.069.
+    default at 27910 (ratio 0.99977; 25 CG steps in all), RMS error 0.030; the DCT path at 28026
+    (+0.4 %), 0.069. (Before SOR: two Gauss-Seidel sweeps, ratio 0.99983, 22 steps.)
     ``history``: the L1 energy after each outer iteration (``history[0]``: the L2 start).
     Missing (non-finite) input gets weight 0.
     """
