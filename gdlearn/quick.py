@@ -77,3 +77,17 @@ def describe(**spent) -> str:
 def caption(text: str, **spent) -> str:
     """A figure caption that ends with its budget: ``"Cornell box (16 spp, seed 1)"``."""
     return f"{text} ({describe(**spent)})" if spent or is_quick() else text
+
+
+class Sentence:
+    """A sentence computed by a chapter, for ``glue(name, Sentence(text), display=False)``.
+
+    ``{glue:text}`` shows the repr of the glued object, and a ``str``'s repr carries quotes; this
+    one's repr is the text itself. Chapters phrase their verdicts from the numbers of the build
+    with it, instead of pasting a verdict that a later build might contradict."""
+
+    def __init__(self, text: str):
+        self.text = str(text)
+
+    def __repr__(self) -> str:
+        return self.text

@@ -36,6 +36,13 @@ def test_captions_say_the_budget_and_quick_mode(monkeypatch):
 
 
 # -- widgets ---------------------------------------------------------------------------------------
+def test_glued_sentences_show_without_quotes():
+    from gdlearn.quick import Sentence
+    # {glue:text} prints the repr: a str would show as 'text' with its quotes
+    assert repr(Sentence("replay wins")) == "replay wins"
+    assert repr("replay wins") != "replay wins"
+
+
 def test_srgb_transfer_curve():
     # Values from IEC 61966-2-1 by hand: 0.5 linear -> 1.055 * 0.5^(1/2.4) - 0.055 = 0.7354 -> 188.
     img = np.array([[0.0, 0.5, 1.0, 4.0, np.nan]])

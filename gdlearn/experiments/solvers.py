@@ -5,7 +5,8 @@ solver names the CLI uses (``--solver``):
 
 * ``cv``          -- iterative control-variate reconstruction (STAR, seed 001, §2.3, Algorithm 1);
 * ``cv-weighted`` -- weighted control variates (seed 001, §5, Eq. 20-22), weights from the frame's
-  two independent half-buffers (:meth:`Frame.variance`);
+  two independent half-buffers (``halves=``: the solver pools their variance estimates over 3 x 3
+  pixels, :mod:`gdlearn.reconstruct.control_variates`);
 * ``l2`` / ``l1`` -- screened Poisson reconstruction, L2 or L1 norm (seed 001, §5, Eq. 18-19), with
   the papers' alpha = 0.2 (seed 004 §5: "the lambda parameter for Poisson reconstruction is set to
   a small value, lambda = 0.2").
@@ -58,7 +59,10 @@ class _Bound:
                              "integrator produced only a primal image; drop --solver for primal methods")
         kwargs = dict(options)
         params = inspect.signature(self.fn).parameters
-        if self.weighted:
+        if self.weighted and "halves" in params:
+            # the solver estimates (and pools) the variances from the two half-buffers itself
+            kwargs.setdefault("halves", {n: frame.halves[n] for n in ("primal", "gx", "gy")})
+        elif self.weighted:
             # Weighted reconstructions take per-pixel variances of primal and gradients (Eq. 20-22).
             var = {n: frame.variance(n) for n in ("primal", "gx", "gy")}
             if "weights" in params:

@@ -23,7 +23,7 @@ from numba import prange
 from ._jit import kernel
 
 __all__ = ["Reconstruction", "Problem", "prepare", "forward_differences", "variances_from_halves",
-           "expand_like"]
+           "pool_variance", "expand_like"]
 
 
 @dataclass
@@ -186,7 +186,7 @@ def forward_differences(image) -> tuple[np.ndarray, np.ndarray]:
     return gx, gy
 
 
-def variances_from_halves(halves: dict) -> dict[str, np.ndarray]:
+def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     """Per-pixel variances of the full means from two independent half-buffers.
 
     ``halves = {"primal": (A, B), "gx": (A, B), "gy": (A, B)}`` where A and B are the means of two
@@ -194,12 +194,39 @@ def variances_from_halves(halves: dict) -> dict[str, np.ndarray]:
     variance is (A - B)^2 / 4 (one degree of freedom per pixel: noisy, but unbiased) -- the same
     estimate as ``gdlearn.integrators.base.Frame.variance`` and the two-buffer approach the STAR
     describes for photon mapping (Hua et al. 2019, Sec. 5.2).
+
+    ``pool = r > 0`` averages those estimates over the (2r + 1)^2 window around each pixel
+    (:func:`pool_variance`): about (2r + 1)^2 degrees of freedom instead of one, at the price of
+    blurring the variance across edges. The weighted control variates use r = 1 (see there).
     """
+    if int(pool) != pool or pool < 0:
+        raise ValueError(f"pool = {pool!r} must be an integer >= 0 (0: per pixel, 1: 3 x 3 window)")
     out = {}
     for name, pair in halves.items():
         a, b = (np.asarray(v, dtype=np.float64) for v in pair)
         if a.shape != b.shape:
             raise ValueError(f"halves[{name!r}]: the two halves have shapes {a.shape} and "
                              f"{b.shape}; they must match")
-        out[name] = 0.25 * (a - b) ** 2
+        v = 0.25 * (a - b) ** 2
+        out[name] = pool_variance(v, int(pool)) if pool else v
     return out
+
+
+def pool_variance(v: np.ndarray, r: int) -> np.ndarray:
+    """Mean of the variance estimates ``v`` (H x W or H x W x C) over the (2r+1) x (2r+1) window of
+    every pixel, clipped at the image border. Non-finite entries (missing data) are left out of every
+    window and stay as they are, so one NaN never spreads and a missing pixel stays missing."""
+    v = np.asarray(v, dtype=np.float64)
+    ok = np.isfinite(v)
+    val = np.where(ok, v, 0.0)
+    pad = [(r, r), (r, r)] + [(0, 0)] * (v.ndim - 2)
+    vp = np.pad(val, pad)                          # zero padding + counts = windows clipped at borders
+    cp = np.pad(ok.astype(np.float64), pad)
+    h, w = v.shape[0], v.shape[1]
+    s = np.zeros_like(val)
+    n = np.zeros_like(val)
+    for dy in range(2 * r + 1):                    # a sum of non-negative terms: never below zero
+        for dx in range(2 * r + 1):
+            s += vp[dy:dy + h, dx:dx + w]
+            n += cp[dy:dy + h, dx:dx + w]
+    return np.where(ok, s / np.maximum(n, 1.0), v)
