@@ -16,7 +16,8 @@ import time
 
 #: ``--shift`` choices: gdlearn.integrators.gpt.SUPPORTED, spelled out so the parser imports no kernels
 #: (tests/test_gpt.py checks that the two agree)
-SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
+                 "halfvector+replay+reconnection")
 
 
 def add_parser(subparsers) -> None:

@@ -53,7 +53,8 @@ from .pt import PathTracer, compile_by_tracing
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
-SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
+             "halfvector+replay+reconnection")
 #: none left; ``experimental=True`` is still accepted (and ignored) for old callers
 EXPERIMENTAL = ()
 #: the default where no specular chain can be moved (Kettunen et al.'s policy; on diffuse scenes it
