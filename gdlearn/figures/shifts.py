@@ -135,12 +135,19 @@ def diffuse_direction(n, u):
     return np.array(vec.to_world(sampling.square_to_cosine_hemisphere(u, 0.5), s, t, tuple(n)))
 
 
+class Path(list):
+    """A base path (list of vertices) that keeps the random numbers it was traced with (``us``), so a
+    replayed offset can read the numbers of bounces the base itself never made."""
+    us: tuple = ()
+
+
 def trace_base(sc: Section, film: float, us, max_vertices: int = 7, start=None):
     """A base path from the camera through ``film``: vertices until the light, an escape, or
     ``max_vertices``. ``us``: one random number per diffuse bounce. ``start`` = (o, d) overrides the
-    camera ray (used for light-to-floor caustic paths)."""
+    camera ray (used for light-to-floor caustic paths). Returns a :class:`Path`."""
     o, d = (np.asarray(sc.camera, float), camera_direction(sc, film)) if start is None else start
-    verts = [Vertex(np.asarray(o, float), np.zeros(3), -1)]
+    verts = Path([Vertex(np.asarray(o, float), np.zeros(3), -1)])
+    verts.us = tuple(us)
     k = 0
     while len(verts) < max_vertices:
         t, s = cast(sc, o, d)
@@ -262,6 +269,9 @@ def _replay(sc, base, off, b, k_o):
     Returns (J, ok, numbers used)."""
     if off[b].surface == SPHERE:
         return 1.0, _continue(sc, off, specular_scatter(sc, unit(off[b].pos - off[b - 1].pos), off[b].normal)), 0
+    if k_o < len(getattr(base, "us", ())):
+        return 1.0, _continue(sc, off, diffuse_direction(off[b].normal, base.us[k_o])), 1
+    # a path built without its numbers (caustic_base): each diffuse bounce's local direction is its number
     diffuse = [i for i in range(1, len(base) - 1) if base[i].vclass != L.V_SPECULAR and base[i].surface != LIGHT]
     if k_o >= len(diffuse):
         return 1.0, False, 0
@@ -387,5 +397,5 @@ def failure_rates(sc: Section, policy: str, films, deltas, n_u: int, seed: int):
     return rates, {k: tuple(v) for k, v in counts.items()}, reasons
 
 
-__all__ = ["Section", "Vertex", "CEILING", "ESCAPED", "ShiftResult", "camera_direction", "cast", "trace_base", "caustic_base",
+__all__ = ["Section", "Vertex", "Path", "CEILING", "ESCAPED", "ShiftResult", "camera_direction", "cast", "trace_base", "caustic_base",
            "base_through", "caustic_example", "film_of", "shift_path", "failure_rates", "FLOOR", "WALL", "LIGHT", "SPHERE", "SURFACE_NAMES"]
