@@ -214,6 +214,12 @@ def test_stats_and_hard_cases_stay_finite():
         assert f.stats[f"shift_{action}_run"] == f.stats[f"shift_{action}_ok"] + f.stats[f"shift_{action}_failed"]
     assert f.stats["shift_fail_failed"] > 0 and f.stats["shift_replay_run"] == 0
     assert np.all(f.gx[:, -1] == 0) and np.all(f.gy[-1, :] == 0)
+    # the mixed policy on the same deep paths: finite, no Kettunen-style "fail", its failures are
+    # replays (or half-vector copies) whose backward shift would reconnect
+    f = render(make("gpt", sc, seed=11, spp_per_pass=4, max_depth=12, shift="halfvector+replay+reconnection"), spp=8)
+    assert all(np.all(np.isfinite(f.images[n])) for n in ("primal", "primal_base", "gx", "gy"))
+    assert f.stats["nonfinite_samples"] == 0 and f.stats["shift_fail_run"] == 0
+    assert f.stats["shift_replay_failed"] > 0 and f.stats["shift_halfvector_run"] > 0
 
 
 def test_bad_options_are_clear_errors():

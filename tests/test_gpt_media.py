@@ -248,7 +248,7 @@ def test_hard_media_stay_finite(sigma_t, g):
     """Thin (1e-8) and dense (1e4) fog, |g| = 0.999: every buffer finite, no sample dropped."""
     sc = _medium_variant(sigma_t, g)
     integ = make("pt", sc)
-    for policy in ("replay", "halfvector+reconnection"):
+    for policy in ("replay", "halfvector+reconnection", "replay+reconnection"):
         out, _, nbad = trace(integ, 11, 4, policy)
         assert np.all(np.isfinite(out)), policy
         assert nbad == 0, f"{policy}: {nbad} samples dropped as non-finite"
