@@ -1,29 +1,36 @@
 """gpt (shift mappings + Eq. 17 MIS) against pt and gpt-replay: cost per pass, shift success rates,
 gradient error at equal samples, relMSE at equal time.
 
-    .venv/bin/python benchmarks/bench_gpt.py                      # 48x48, 3 scenes, 6 s x 2 seeds
+    .venv/bin/python benchmarks/bench_gpt.py                      # 48x48, 5 scenes, 6 s x 2 seeds
     .venv/bin/python benchmarks/bench_gpt.py --res 24 --seconds 1 --seeds 1 --repeat 3 --ref-spp 512   # smoke run
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_gpt.py --res 32 --grad-spp 16 --seeds 24 \
+        --et-seeds 3 --seconds 4 --repeat 5 --ref-spp 4096 --threads 1 --et-policies replay+reconnection \
+        halfvector+replay+reconnection halfvector+reconnection halfvector+reconnection+manifold
+                                                                  # the run quoted in gdlearn.integrators.gpt
 
 Scenes: ``cornell-box``, ``caustics-box``, ``fog-box``, ``mesh`` and ``caustic-closeup`` (manifold
-exploration's scene) by default. A scene that
-``make("gpt", scene)`` refuses (e.g. media, before the integrator supports them) is reported with
-the integrator's error and skipped, so there are at least three scenes while fog is unsupported.
+exploration's scene) by default. A scene that ``make("gpt", scene)`` refuses is reported with the
+integrator's error and skipped.
 
 1. **Time per pass.** pt, gpt-replay and gpt with every supported policy render passes of the same
    samples (same seed, scene, spp, threads), interleaved so all see the same machine load; medians
    of ``--repeat`` passes, JIT warmed first (compile seconds printed apart). Ratios to pt.
 2. **Shift statistics** of the timed gpt passes (``Frame.stats`` counters ``shift_<action>_*``,
    :func:`gdlearn.experiments.gradients.shift_summary`): per action, runs per base path (over the
-   four offsets and all vertices) and the fraction that succeeded. ``fail`` counts vertex-class
-   mismatches (including offsets that left the scene): those gradients fall back to finite differences.
+   four offsets and all vertices) and the fraction that succeeded. Every failed step falls back to a
+   finite difference for that path: ``fail`` counts Kettunen et al.'s vertex-class mismatches
+   (including offsets that left the scene); a mixed policy's failures are replays (or half-vector
+   copies) whose backward shift would reconnect.
 3. **Gradient error at equal samples** (the STAR's Fig. 5): :func:`gdlearn.experiments.gradients.
    gradient_errors` -- relMSE of gx, gy against the finite differences of the reference, relative
    to the brightness of the pixel pair, ``--grad-spp`` samples, mean +- standard error over
-   ``--seeds`` seeds. Baseline: finite differences of pt's image at the same spp.
-4. **Equal time** (:func:`gdlearn.experiments.equal_time`): pt, gpt-replay and gpt (``--et-policies``,
-   default the integrator's default policy),
-   the gradient methods reconstructed with each of ``--solvers``, ``--seconds`` per run (JIT
-   excluded, final reconstruction included), ``--seeds`` seeds, against a ``--ref-spp`` path-traced
+   ``--seeds`` seeds, and the ratio replay / method of the mean errors with its *paired* standard
+   error (every method renders the same seeds; :func:`paired_ratio`). Baseline: finite differences
+   of pt's image at the same spp.
+4. **Equal time** (:func:`gdlearn.experiments.equal_time`), per scene: pt, gpt-replay and gpt with
+   each of ``--et-policies`` that runs there (``default``: the integrator's default policy), the
+   gradient methods reconstructed with each of ``--solvers``, ``--seconds`` per run (JIT excluded,
+   final reconstruction included), ``--et-seeds`` seeds, against a ``--ref-spp`` path-traced
    reference with an independent seed (cached on disk). ``pt/method`` and ``replay/method`` (replay
    = gpt-replay with the same solver) > 1 mean the method has the lower error.
 
@@ -40,7 +47,7 @@ from gdlearn.experiments.gradients import gradient_errors, shift_summary, summar
 from gdlearn.experiments.references import render_reference
 from gdlearn.experiments.study import Method
 from gdlearn.integrators import make
-from gdlearn.integrators.gpt import DEFAULT_POLICY, MANIFOLD_POLICY, SUPPORTED
+from gdlearn.integrators.gpt import MANIFOLD_POLICY, SUPPORTED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ACTIONS = ("replay", "halfvector", "reconnection", "manifold", "fail")
@@ -58,7 +65,8 @@ def scene_policies(name, scene_file, policies):
             print(f"{name}: policy {p} skipped: {e}")
             continue
         if p == MANIFOLD_POLICY and not integ.manifold:
-            print(f"{name}: policy {p} skipped: no specular chain the walk could move (it is {DEFAULT_POLICY} here)")
+            print(f"{name}: policy {p} skipped: no specular chain the walk could move "
+                  "(it is halfvector+reconnection here)")
             continue
         out.append(p)
     return out
@@ -94,10 +102,10 @@ def print_costs(files, a):
         t, jit, stats = time_per_pass(sf, a.spp, a.repeat, a.threads, a.ok[name])
         all_stats[name] = stats
         row = "  ".join(f"{m} {t[m]:.3f}s ({t[m] / t['pt']:.2f}x)" for m in t)
-        print(f"{name:13s} {row}")
-        print(f"{'':13s} JIT s: " + ", ".join(f"{m} {jit[m]:.1f}" for m in jit))
+        print(f"{name:15s} {row}")
+        print(f"{'':15s} JIT s: " + ", ".join(f"{m} {jit[m]:.1f}" for m in jit))
     print("\n## shift statistics of the timed gpt passes: runs per base path / success rate")
-    print(f"{'scene':13s} {'policy':26s} " + " ".join(f"{x:>18s}" for x in ACTIONS))
+    print(f"{'scene':15s} {'policy':32s} " + " ".join(f"{x:>18s}" for x in ACTIONS))
     for name, stats in all_stats.items():
         for p in a.ok[name]:
             s = shift_summary(stats[f"gpt[{p}]"])
@@ -108,12 +116,31 @@ def print_costs(files, a):
                     cells.append(f"{'-':>18s}")
                 else:
                     cells.append(f"{c['per_path']:8.3f} / {c['success']:7.1%}")
-            print(f"{name:13s} {p:26s} " + " ".join(f"{c:>18s}" for c in cells))
+            print(f"{name:15s} {p:32s} " + " ".join(f"{c:>18s}" for c in cells))
+
+
+def paired_ratio(recs, base, label, name):
+    """error(base) / error(label), the ratio of the mean errors over seeds, with its standard error from
+    the *paired* seeds (delta method with their covariance): every method renders the same seeds, and
+    gpt's base paths are pt's and gpt-replay's for the same seed, so the two errors are correlated and
+    the paired error separates methods far better than two independent means do."""
+    err = {}
+    for r in recs:
+        if r["scene"] == name and r["method"] in (base, label):
+            err.setdefault(r["seed"], {})[r["method"]] = r["grad_relmse"]
+    pairs = np.array([(e[base], e[label]) for e in err.values() if base in e and label in e])
+    y, x = pairs[:, 0], pairs[:, 1]
+    q = y.mean() / x.mean()
+    if len(pairs) < 2:
+        return float(q), float("nan")
+    c = np.cov(y, x)
+    rel = c[0, 0] / y.mean() ** 2 + c[1, 1] / x.mean() ** 2 - 2 * c[0, 1] / (y.mean() * x.mean())
+    return float(q), float(q * np.sqrt(max(rel, 0.0) / len(pairs)))
 
 
 def print_gradient_error(files, refs, a):
     print(f"\n## gradient relMSE at equal samples ({a.grad_spp} spp, mean +- stderr of {a.seeds} seeds; "
-          "ratio = replay / method)")
+          "ratio = replay / method, of the mean errors, +- its paired stderr)")
     for name, sf in files.items():
         methods = [Method("pt (finite differences)", "pt"), Method("replay (gpt-replay)", "gpt-replay")]
         methods += [Method(p, "gpt", None, (("shift", p),)) for p in a.ok[name]]
@@ -123,7 +150,8 @@ def print_gradient_error(files, refs, a):
         rep = summ[("replay (gpt-replay)", name)]["mean"]
         for m in methods:
             s = summ[(m.label, name)]
-            print(f"{name:13s} {m.label:26s} {s['mean']:10.3e} +- {s['stderr']:8.1e}   {rep / s['mean']:6.2f}x")
+            q, se = paired_ratio(recs, "replay (gpt-replay)", m.label, name)
+            print(f"{name:15s} {m.label:32s} {s['mean']:10.3e} +- {s['stderr']:8.1e}   {q:5.2f}x +- {se:4.2f}")
 
 
 def references(files, a):
@@ -137,24 +165,27 @@ def references(files, a):
 
 
 def print_equal_time(files, refs, a):
-    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.seeds} seeds, reference pt {a.ref_spp} spp")
-    methods = [Method.parse("pt")] + [Method.parse(f"gpt-replay+{s}") for s in a.solvers]
-    for p in a.et_policies:
-        methods += [Method(f"gpt[{p}]+{s}", "gpt", s, (("shift", p),)) for s in a.solvers]
-    files = {n: sf for n, sf in files.items() if all(p in a.ok[n] for p in a.et_policies)}
-    study = equal_time(methods, list(files.values()), seconds=a.seconds, seeds=a.seeds, references=refs,
-                       executor="serial", count=6, first=a.seconds / 10, spp_per_pass=2)
-    vs_pt = study.equal_time_ratios("pt")
-    vs_rep = {s: study.equal_time_ratios(f"gpt-replay+{s}") for s in a.solvers}
-    print(f"{'scene':13s} {'method':36s} {'spp':>6s} {'relMSE':>10s} {'min..max over seeds':>22s} "
+    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.et_seeds} seeds, reference pt {a.ref_spp} spp")
+    print(f"{'scene':15s} {'method':44s} {'spp':>6s} {'relMSE':>10s} {'min..max over seeds':>22s} "
           f"{'pt/method':>10s} {'replay/method':>14s}")
-    for name in files:
+    for name, sf in files.items():            # per scene: the policies gpt runs there (a.ok)
+        methods = [Method.parse("pt")] + [Method.parse(f"gpt-replay+{s}") for s in a.solvers]
+        for p in a.et_policies:
+            if p == "default":
+                methods += [Method(f"gpt[default: {make('gpt', sf.load()).shift}]+{s}", "gpt", s)
+                            for s in a.solvers]
+            elif p in a.ok[name]:
+                methods += [Method(f"gpt[{p}]+{s}", "gpt", s, (("shift", p),)) for s in a.solvers]
+        study = equal_time(methods, [sf], seconds=a.seconds, seeds=a.et_seeds, references=refs,
+                           executor="serial", count=6, first=a.seconds / 10, spp_per_pass=2)
+        vs_pt = study.equal_time_ratios("pt")
+        vs_rep = {s: study.equal_time_ratios(f"gpt-replay+{s}") for s in a.solvers}
         for m in methods:
             fin = study.select(True, method=m.label, scene=name)
             err = [r["relmse"] for r in fin]
             rep = (f"{vs_rep[m.solver][(m.label, name)]:13.2f}x" if m.estimator == "gpt" else f"{'':14s}")
-            print(f"{name:13s} {m.label:36s} {np.mean([r['spp'] for r in fin]):6.0f} {np.mean(err):10.3e} "
-                  f"{min(err):10.2e}..{max(err):9.2e} {vs_pt[(m.label, name)]:9.2f}x {rep}")
+            print(f"{name:15s} {m.label:44s} {np.mean([r['spp'] for r in fin]):6.0f} {np.mean(err):10.3e} "
+                  f"{min(err):10.2e}..{max(err):9.2e} {vs_pt[(m.label, name)]:9.2f}x {rep}", flush=True)
 
 
 def supported_scenes(names, res):
@@ -176,19 +207,22 @@ def main():
     ap.add_argument("--scenes", nargs="+", default=["cornell-box", "caustics-box", "fog-box", "mesh",
                                                      "caustic-closeup"])
     ap.add_argument("--policies", nargs="+", default=list(SUPPORTED), choices=list(SUPPORTED))
-    ap.add_argument("--et-policies", nargs="+", default=[DEFAULT_POLICY], choices=list(SUPPORTED),
-                    help="gpt policies in the equal-time study (each costs seeds x scenes x solvers runs)")
+    ap.add_argument("--et-policies", nargs="+", default=["default"], choices=["default"] + list(SUPPORTED),
+                    help="gpt policies in the equal-time study, 'default' = gpt's default_policy per scene, "
+                         "each where gpt runs it (each costs seeds x scenes x solvers runs)")
     ap.add_argument("--res", type=int, default=48)
     ap.add_argument("--spp", type=int, default=4, help="samples per pixel of one timed pass")
     ap.add_argument("--repeat", type=int, default=5, help="timed passes per integrator (median)")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--seconds", type=float, default=6.0, help="equal-time budget per run")
-    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seeds", type=int, default=2, help="seeds of the equal-sample gradient study")
+    ap.add_argument("--et-seeds", type=int, default=None, help="seeds of the equal-time study (default --seeds)")
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--grad-spp", type=int, default=16)
     ap.add_argument("--solvers", nargs="+", default=["l1", "l2"])
     ap.add_argument("--no-equal-time", action="store_true")
     a = ap.parse_args()
+    a.et_seeds = a.et_seeds or a.seeds
     print(f"# gpt vs pt / gpt-replay: {a.res}x{a.res}, load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores, threads {a.threads or 'all'}; policies {', '.join(a.policies)}")
     files = supported_scenes(a.scenes, a.res)

@@ -22,7 +22,7 @@ import pytest
 from scipy import stats
 
 from gdlearn.integrators import make, render
-from gdlearn.kernels.gpt_shift import BROKEN_HV_JACOBIAN, BROKEN_JACOBIAN, BROKEN_MIS
+from gdlearn.kernels.gpt_shift import BROKEN_HV_JACOBIAN, BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_UNPAIRED
 from gdlearn.scene.load import load
 
 ROOT = __file__.rsplit("/tests/", 1)[0]
@@ -119,12 +119,18 @@ def _pilot(name):
 
 
 @pytest.mark.parametrize("name,shift,effects", [("cornell-box", "halfvector+reconnection", None),
+                                                ("cornell-box", "replay+reconnection", None),
                                                 ("caustics-box", "halfvector+reconnection", None),
                                                 ("caustics-box", "replay+reconnection", None),
+                                                ("caustics-box", "halfvector+replay+reconnection", None),
                                                 ("caustics-box", "replay", None),
                                                 ("near-specular", "halfvector+reconnection", None),
                                                 ("near-specular", "replay+reconnection", None),
+                                                ("near-specular", "halfvector+replay+reconnection", None),
                                                 ("glossy", "halfvector+reconnection", None),
+                                                ("glossy", "replay+reconnection", None),
+                                                ("mesh", "replay+reconnection", None),
+                                                ("caustics-box", "replay+reconnection", "caustics"),
                                                 # each path's own class decides: an offset's
                                                 # class may differ from its base's
                                                 ("caustics-box", "halfvector+reconnection", "caustics"),
@@ -158,6 +164,19 @@ def test_reconnection_jacobian_one_fails_the_same_test():
     tx, ty, _ = block_t(dx, dy)
     # measured 4.3 (0.95 for the correct Jacobian): far above the threshold the correct one passes
     assert omnibus(tx, ty) > OMNIBUS_MAX, f"the test cannot see a Jacobian of 1: mean t^2 {omnibus(tx, ty):.2f}"
+
+
+def test_unpaired_technique_weighted_by_eq17_fails_the_same_test():
+    """replay+reconnection replays an offset onto the glass or the mirror where its base is diffuse;
+    the offset has no next-event technique there (density 0), so the base's sample must keep weight 1
+    (gpt_mixed.unpaired). Weighted by Eq. 17 instead (gpt_shift.BROKEN_UNPAIRED), half of it is lost
+    along the spheres' silhouettes: measured max block |t| 5.97 (k 5.35), mean t^2 2.60 (the correct
+    policy: 2.38 and 1.02)."""
+    dx, dy = differences(_frames(_scene("caustics-box"), "replay+reconnection", broken=BROKEN_UNPAIRED))
+    tx, ty, k = block_t(dx, dy)
+    assert omnibus(tx, ty) > OMNIBUS_MAX and max(tx.max(), ty.max()) > k, (
+        f"the test cannot see the unpaired weight: block |t| {tx.max():.2f}, {ty.max():.2f} <= {k:.2f}, "
+        f"mean t^2 {omnibus(tx, ty):.2f}")
 
 
 def test_halfvector_jacobian_one_fails_the_same_test():
@@ -195,6 +214,12 @@ def test_stats_and_hard_cases_stay_finite():
         assert f.stats[f"shift_{action}_run"] == f.stats[f"shift_{action}_ok"] + f.stats[f"shift_{action}_failed"]
     assert f.stats["shift_fail_failed"] > 0 and f.stats["shift_replay_run"] == 0
     assert np.all(f.gx[:, -1] == 0) and np.all(f.gy[-1, :] == 0)
+    # the mixed policy on the same deep paths: finite, no Kettunen-style "fail", its failures are
+    # replays (or half-vector copies) whose backward shift would reconnect
+    f = render(make("gpt", sc, seed=11, spp_per_pass=4, max_depth=12, shift="halfvector+replay+reconnection"), spp=8)
+    assert all(np.all(np.isfinite(f.images[n])) for n in ("primal", "primal_base", "gx", "gy"))
+    assert f.stats["nonfinite_samples"] == 0 and f.stats["shift_fail_run"] == 0
+    assert f.stats["shift_replay_failed"] > 0 and f.stats["shift_halfvector_run"] > 0
 
 
 def test_bad_options_are_clear_errors():

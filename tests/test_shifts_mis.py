@@ -101,8 +101,15 @@ def test_policy_choices():
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, D, D, long_chain, 1, 7) == P.SHIFT_HALFVECTOR
     open_chain = _vc(D, D, S, S)
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, D, D, open_chain, 1, 4) == P.SHIFT_HALFVECTOR
-    # base and offset classes disagree: not invertible -> fail
+    # base and offset classes disagree: Kettunen et al.'s rule fails; replay and the mixed policies replay
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, D, S, path, 1, 3) == P.SHIFT_FAIL
+    for pol in (P.POLICY_REPLAY, P.POLICY_REPLAY_RECONNECTION, P.POLICY_HALFVECTOR_REPLAY_RECONNECTION):
+        assert P.choose_shift(pol, D, S, path, 1, 3) == P.SHIFT_REPLAY
+        assert P.choose_shift(pol, S, D, path, 1, 3) == P.SHIFT_REPLAY
+    # the mixed half-vector policy copies half vectors only where both vertices are not connectable
+    assert P.choose_shift(P.POLICY_HALFVECTOR_REPLAY_RECONNECTION, D, D, chain, 1, 5) == P.SHIFT_REPLAY
+    assert P.choose_shift(P.POLICY_HALFVECTOR_REPLAY_RECONNECTION, S, S, chain, 2, 5) == P.SHIFT_HALFVECTOR
+    assert P.choose_shift(P.POLICY_HALFVECTOR_REPLAY_RECONNECTION, D, D, path, 1, 3) == P.SHIFT_RECONNECT
     # glossy and medium vertices reconnect like diffuse ones
     assert P.choose_shift(P.POLICY_HALFVECTOR_RECONNECTION, G, M, _vc(D, G, M), 1, 3) == P.SHIFT_RECONNECT
     # last vertex (next-event estimation): reconnect from a connectable vertex only

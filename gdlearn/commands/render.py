@@ -16,7 +16,8 @@ import time
 
 #: ``--shift`` choices: gdlearn.integrators.gpt.SUPPORTED, spelled out so the parser imports no kernels
 #: (tests/test_gpt.py checks that the two agree)
-SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
+                 "halfvector+replay+reconnection")
 
 
 def add_parser(subparsers) -> None:
@@ -39,8 +40,8 @@ def add_parser(subparsers) -> None:
                         "(default none: the primal image)")
     p.add_argument("--shift", default=None, choices=SHIFT_CHOICES, metavar="POLICY",
                    help="gpt only: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
-                        "manifold exploration where the effects plan has specular chains, else "
-                        "halfvector+reconnection)")
+                        "manifold exploration where the effects plan renders caustics through specular chains the "
+                        "walk can move, else halfvector+replay+reconnection)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -135,12 +135,19 @@ def diffuse_direction(n, u):
     return np.array(vec.to_world(sampling.square_to_cosine_hemisphere(u, 0.5), s, t, tuple(n)))
 
 
+class Path(list):
+    """A base path (list of vertices) that keeps the random numbers it was traced with (``us``), so a
+    replayed offset can read the numbers of bounces the base itself never made."""
+    us: tuple = ()
+
+
 def trace_base(sc: Section, film: float, us, max_vertices: int = 7, start=None):
     """A base path from the camera through ``film``: vertices until the light, an escape, or
     ``max_vertices``. ``us``: one random number per diffuse bounce. ``start`` = (o, d) overrides the
-    camera ray (used for light-to-floor caustic paths)."""
+    camera ray (used for light-to-floor caustic paths). Returns a :class:`Path`."""
     o, d = (np.asarray(sc.camera, float), camera_direction(sc, film)) if start is None else start
-    verts = [Vertex(np.asarray(o, float), np.zeros(3), -1)]
+    verts = Path([Vertex(np.asarray(o, float), np.zeros(3), -1)])
+    verts.us = tuple(us)
     k = 0
     while len(verts) < max_vertices:
         t, s = cast(sc, o, d)
@@ -254,18 +261,34 @@ def _halfvector(sc, base, off, b):
     return j, ok and _continue(sc, off, np.array(wo))
 
 
-def _replay(sc, base, off, b):
-    """Same random numbers at b: a diffuse vertex copies the local direction (the same u), a specular
-    one applies its law to the offset's own incoming direction."""
-    if base[b].surface == SPHERE:
-        d = specular_scatter(sc, unit(off[b].pos - off[b - 1].pos), off[b].normal)
-    else:
-        nb, no = tuple(base[b].normal), tuple(off[b].normal)
-        sb, tb = vec.coordinate_system(nb)
-        so, to = vec.coordinate_system(no)
-        local = vec.to_local(tuple(unit(base[b + 1].pos - base[b].pos)), sb, tb, nb)
-        d = np.array(vec.to_world(local, so, to, no))
-    return 1.0, _continue(sc, off, d)
+def _replay(sc, base, off, b, k_o):
+    """Same random numbers at b (STAR Sec. 3.1): an offset vertex on the sphere applies its law to its
+    own incoming direction; a diffuse one takes the number of its own k_o-th diffuse bounce -- the
+    base's k_o-th diffuse bounce's number, which fixes that bounce's *local* direction -- as the path
+    tracer would from the same numbers (after a class mismatch k_o differs from the base's count).
+    Returns (J, ok, numbers used)."""
+    if off[b].surface == SPHERE:
+        return 1.0, _continue(sc, off, specular_scatter(sc, unit(off[b].pos - off[b - 1].pos), off[b].normal)), 0
+    if k_o < len(getattr(base, "us", ())):
+        return 1.0, _continue(sc, off, diffuse_direction(off[b].normal, base.us[k_o])), 1
+    # a path built without its numbers (caustic_base): each diffuse bounce's local direction is its number
+    diffuse = [i for i in range(1, len(base) - 1) if base[i].vclass != L.V_SPECULAR and base[i].surface != LIGHT]
+    if k_o >= len(diffuse):
+        return 1.0, False, 0
+    i = diffuse[k_o]
+    nb, no = tuple(base[i].normal), tuple(off[b].normal)
+    sb, tb = vec.coordinate_system(nb)
+    so, to = vec.coordinate_system(no)
+    local = vec.to_local(tuple(unit(base[i + 1].pos - base[i].pos)), sb, tb, nb)
+    return 1.0, _continue(sc, off, np.array(vec.to_world(local, so, to, no))), 1
+
+
+def _inverse_reconnects(sc, base, off, b):
+    """Would the backward shift (base: the offset) reconnect base[b] to the offset's new vertex? Then the
+    step is not reversible (gdlearn.shifts.policy, "Reversibility")."""
+    y2 = off[b + 1]
+    return (base[b].vclass != L.V_SPECULAR and off[b].vclass != L.V_SPECULAR and y2.surface >= 0
+            and y2.vclass != L.V_SPECULAR and _reaches(sc, base[b].pos, y2.pos))
 
 
 def _manifold(sc, base, off, b, end, max_iter):
@@ -289,9 +312,12 @@ def _manifold(sc, base, off, b, end, max_iter):
 def shift_path(sc: Section, base: list, delta: float, policy: str, max_iter: int = M.MAX_ITER) -> ShiftResult:
     """Shift ``base`` (a camera-first vertex list) by ``delta`` pixels with a named policy
     (``gdlearn.shifts.policy.POLICIES``): the camera ray moves by delta, then at each vertex the
-    policy's action runs. A failure (the library's flag, a class mismatch, a blocked or escaping offset
-    segment) stops the walk: the offset contributes nothing (STAR Sec. 3.5)."""
+    policy's action runs. A failure (the library's flag, a class mismatch under Kettunen et al.'s
+    policies, a blocked or escaping offset segment, a step the backward shift would not repeat) stops
+    the walk: the offset contributes nothing (STAR Sec. 3.5). The mixed policies and ``replay`` replay
+    through class mismatches; a blocked reconnection makes a mixed policy replay instead."""
     code = P.policy_code(policy)
+    mixed = P.is_mixed(code)
     off = [base[0]]
     actions, jacs = [], []
     film = film_of(sc, base[1].pos) + delta
@@ -299,21 +325,27 @@ def shift_path(sc: Section, base: list, delta: float, policy: str, max_iter: int
         return _fail(off, actions, jacs, "offset camera ray leaves the scene")
     classes = np.array([v.vclass for v in base], np.int32)
     n = len(base)
-    b = 1
+    b, k_o = 1, 0
     while b < n - 1 and base[b].surface != LIGHT:
         if off[b].surface == LIGHT:
             return _fail(off, actions, jacs, "offset ends on the light early")
         a = P.choose_shift(code, base[b].vclass, off[b].vclass, classes, b, n)
-        actions.append(P.ACTION_NAMES[a])
         if a == P.SHIFT_FAIL:
+            actions.append(P.ACTION_NAMES[a])
             return _fail(off, actions, jacs, "vertex classes differ")
         if a == P.SHIFT_RECONNECT:
             _, _, _, j_sa, ok = reconnect(tuple(base[b].pos), tuple(off[b].pos), tuple(base[b + 1].pos),
                                           tuple(base[b + 1].normal))
-            jacs.append(j_sa)
-            if not (ok and _reaches(sc, off[b].pos, base[b + 1].pos)):
+            if ok and _reaches(sc, off[b].pos, base[b + 1].pos):
+                actions.append(P.ACTION_NAMES[a])
+                jacs.append(j_sa)
+                return ShiftResult(off + base[b + 1:], actions, True, "", jacs)
+            if not mixed:
+                actions.append(P.ACTION_NAMES[a])
+                jacs.append(j_sa)
                 return _fail(off + [base[b + 1]], actions, jacs, "reconnection blocked")
-            return ShiftResult(off + base[b + 1:], actions, True, "", jacs)
+            a = P.mixed_action(code, base[b].vclass != L.V_SPECULAR, off[b].vclass != L.V_SPECULAR)
+        actions.append(P.ACTION_NAMES[a])
         if a == P.SHIFT_MANIFOLD:
             end = P.specular_chain_end(classes, b + 1, n)
             j, ok, why = _manifold(sc, base, off, b, end, max_iter)
@@ -321,11 +353,18 @@ def shift_path(sc: Section, base: list, delta: float, policy: str, max_iter: int
             if not ok:
                 return _fail(off, actions, jacs, why)
             return ShiftResult(off + base[end:], actions, True, "", jacs)
-        j, ok = (_halfvector if a == P.SHIFT_HALFVECTOR else _replay)(sc, base, off, b)
+        if a == P.SHIFT_HALFVECTOR:
+            j, ok = _halfvector(sc, base, off, b)
+            used = 1 if off[b].vclass != L.V_SPECULAR else 0
+        else:
+            j, ok, used = _replay(sc, base, off, b, k_o)
         jacs.append(j)
+        k_o += used
         if not ok:
             why = "offset ray leaves the scene" if off[-1].surface == ESCAPED else f"{P.ACTION_NAMES[a]} failed"
             return _fail(off, actions, jacs, why)
+        if mixed and _inverse_reconnects(sc, base, off, b):
+            return _fail(off, actions, jacs, "the backward shift would reconnect")
         b += 1
     return ShiftResult(off, actions, True, "", jacs)
 
@@ -358,5 +397,5 @@ def failure_rates(sc: Section, policy: str, films, deltas, n_u: int, seed: int):
     return rates, {k: tuple(v) for k, v in counts.items()}, reasons
 
 
-__all__ = ["Section", "Vertex", "CEILING", "ESCAPED", "ShiftResult", "camera_direction", "cast", "trace_base", "caustic_base",
+__all__ = ["Section", "Vertex", "Path", "CEILING", "ESCAPED", "ShiftResult", "camera_direction", "cast", "trace_base", "caustic_base",
            "base_through", "caustic_example", "film_of", "shift_path", "failure_rates", "FLOOR", "WALL", "LIGHT", "SPHERE", "SURFACE_NAMES"]

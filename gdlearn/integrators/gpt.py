@@ -14,17 +14,18 @@ the neighbour, with the same Eq. 17 weights. ``images["primal"]`` is that estima
 ``images["primal_base"]`` is the base radiance alone (``pt``'s estimator, same random numbers).
 
 Policies (``shift=``): ``replay`` (the whole path replayed, :mod:`gdlearn.kernels.gpt_replay_policy`:
-``gpt-replay``'s estimator, Eq. 17 weights 1/2), ``replay+reconnection``, ``halfvector+reconnection``
-(Kettunen et al.'s) and ``halfvector+reconnection+manifold`` (manifold exploration of specular chains
+``gpt-replay``'s estimator, Eq. 17 weights 1/2), the mixed policies ``replay+reconnection`` and
+``halfvector+replay+reconnection`` (:mod:`gdlearn.kernels.gpt_mixed`: reconnect where the criterion
+holds from both sides, else replay -- also through a class mismatch -- or copy the half vector between
+two non-connectable vertices; fail only where the backward shift would reconnect),
+``halfvector+reconnection`` (Kettunen et al.'s: fails on a class mismatch) and
+``halfvector+reconnection+manifold`` (Kettunen et al.'s plus manifold exploration of specular chains
 between connectable vertices, :mod:`gdlearn.kernels.gpt_manifold`). The manifold walk runs only where
 the effects plan has specular chains and the scene has analytic specular shapes (``self.manifold``);
-elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy`,
-manifold exploration where the plan renders caustics and the walk can run (no media),
-halfvector+reconnection elsewhere: on every benchmark scene the lowest gradient error at equal samples
-among the path-space policies (numbers in :data:`DEFAULT_POLICY`'s comment; whole-path ``replay``,
-which cannot fail, is lower still on some scenes: book/gpt.md). Scenes with media or null interfaces
-run the twin kernel :func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same signature and buffers),
-imported lazily; it has no manifold walk.
+elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy` --
+:data:`DEFAULT_RULE`, with the measurements in :data:`DEFAULT_POLICY`'s comment. Scenes with media or
+null interfaces run the twin kernel :func:`gdlearn.kernels.gpt_volume.gpt_volume_rows` (same
+signature and buffers), imported lazily; it has no manifold walk.
 
 Frame stats: ``paths``, ``nonfinite_samples`` and, per shift action, ``shift_<action>_{run,ok,failed}``
 (actions: replay, halfvector, reconnection, manifold, fail) counted over offset path segments.
@@ -53,20 +54,37 @@ from .pt import PathTracer, compile_by_tracing
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
-SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold")
+SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
+             "halfvector+replay+reconnection")
 #: none left; ``experimental=True`` is still accepted (and ignored) for old callers
 EXPERIMENTAL = ()
-#: the default where no specular chain can be moved (Kettunen et al.'s policy; on diffuse scenes it
-#: runs the same reconnections as replay+reconnection). Where the walk runs, MANIFOLD_POLICY has the
-#: lowest gradient relMSE of the path-space policies at equal samples. benchmarks/bench_gpt.py, 32^2,
-#: 16 spp, 6 seeds (2026-11-22), error of whole-path replay / error of the policy (> 1: policy better):
-#: caustics box manifold 0.98 +- 0.1, halfvector+reconnection 0.76, replay+reconnection 0.92; close-up
-#: caustic manifold 1.37, halfvector+reconnection 0.50, replay+reconnection 0.54; Cornell box and fog
-#: halfvector+reconnection 1.08 and 1.26; mesh 0.84 (book/gpt.md discusses why replay can win).
-#: At equal time (2 s, 32^2, 2 seeds, relMSE after L1 / L2) manifold beat halfvector+reconnection on the
-#: close-up (0.98 / 0.86 against 1.56 / 1.77) but not with L1 on the caustics box (7.8e-2 against 5.8e-2;
-#: L2 0.16 against 0.17); gpt-replay + L1 beat both there.
-DEFAULT_POLICY = "halfvector+reconnection"
+#: the default wherever the manifold walk does not run: the mixed half-vector policy (on scenes without
+#: glossy or specular vertices it runs exactly replay+reconnection's shifts). Measured 2026-12-01 with
+#: benchmarks/bench_gpt.py --res 32 --grad-spp 16 --seeds 24 --et-seeds 3 --seconds 4 --threads 1
+#: (NUMBA_NUM_THREADS=1, load 1.7-3.1 on 2 cores): gradient error at equal samples, error of whole-path
+#: replay / error of the policy (> 1: policy better; +- paired stderr over the 24 seeds):
+#:   cornell-box      halfvector+replay+reconnection = replay+reconnection 1.10 +- 0.02, halfvector+reconnection 1.09
+#:   fog-box          halfvector+replay+reconnection = replay+reconnection 1.65 +- 0.33, halfvector+reconnection 1.50
+#:   mesh             halfvector+replay+reconnection = replay+reconnection 0.83 +- 0.01, halfvector+reconnection 0.82
+#:   caustics-box     halfvector+replay+reconnection 0.98 +- 0.05, replay+reconnection 0.95 +- 0.06,
+#:                    halfvector+reconnection 0.77 +- 0.04, manifold 0.99 +- 0.11
+#:   caustic-closeup  halfvector+replay+reconnection 0.96 +- 0.02, replay+reconnection 0.91 +- 0.03,
+#:                    halfvector+reconnection 0.48 +- 0.02, manifold 1.32 +- 0.15
+#: so no path-space policy beats halfvector+replay+reconnection where the walk cannot run. Whole-path
+#: replay is lower on the mesh scene at equal samples (the reconnection's geometry terms near contacts
+#: and facets: book/gpt.md); at equal time (4 s, relMSE against pt 4096 spp, 3 seeds, L1 / L2, this
+#: policy vs gpt-replay with the same solver) it is the other way round there: mesh 1.06 / 1.36, Cornell
+#: 1.58 / 1.38, fog 1.39 / 1.09; on the two caustic scenes gpt-replay stays ahead at equal time:
+#: caustics box 0.93 / 0.76, close-up 0.78 / 0.71 (manifold there 0.83 / 0.83). MANIFOLD_POLICY stays
+#: where the plan renders caustics through movable chains: it wins the close-up at equal samples and at
+#: equal time; on the caustics box it ties at equal samples and loses to this default with L1 at equal
+#: time (0.69 against 0.93; L2 0.83 against 0.76). Equal-time numbers at this load move by ~10 %
+#: between identical estimators (replay+reconnection and this policy on the fog box: 1.31 / 1.39).
+DEFAULT_POLICY = "halfvector+replay+reconnection"
+#: what :func:`default_policy` does, in words (the book quotes it)
+DEFAULT_RULE = ("By default gpt takes manifold exploration where the scene's effects plan renders caustics "
+                "through specular chains the walk can move (analytic shapes, no media), and "
+                "halfvector+replay+reconnection everywhere else.")
 MANIFOLD_POLICY = "halfvector+reconnection+manifold"
 
 
@@ -172,10 +190,10 @@ def _has_null_or_media(integ) -> bool:
 
 def default_policy(integ) -> str:
     """The policy ``shift=None`` picks for a constructed PathTracer ``integ`` (its scene, plan and compiled
-    arrays): :data:`MANIFOLD_POLICY` where the effects plan renders caustics through specular chains,
-    the scene has no media and at least one analytic specular shape the walk can move, else
-    :data:`DEFAULT_POLICY`. The plan decides: ``--effects direct`` on a caustic scene renders no
-    caustic, so no manifold code runs."""
+    arrays; :data:`DEFAULT_RULE`): :data:`MANIFOLD_POLICY` where the effects plan renders caustics
+    through specular chains, the scene has no media and at least one analytic specular shape the walk
+    can move, else :data:`DEFAULT_POLICY` (measurements in its comment). The plan decides:
+    ``--effects direct`` on a caustic scene renders no caustic, so no manifold code runs."""
     if integ.plan.specular_chains and "caustics" in integ.plan.names and not _has_null_or_media(integ):
         if np.any(manifold_table(integ.scene, integ.sa)[:, 0] >= 0.0):
             return MANIFOLD_POLICY

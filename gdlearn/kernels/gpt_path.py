@@ -25,6 +25,12 @@ Russian roulette uses max(base, offset) throughput, so a base path that turns bl
 material) keeps going while an offset can still contribute: otherwise the forward shift of those
 paths would never be sampled and their gradient would be lost.
 
+Mixed policies (``replay+reconnection``, ``halfvector+replay+reconnection``): the free offsets take
+:func:`gdlearn.kernels.gpt_mixed.shift_segment_mixed` -- replay instead of failing where the vertex
+classes disagree, reconnection where its criterion holds from both sides, a failure only where the
+backward shift would reconnect -- and a base technique the offset lacks is paired with nothing
+(weight 1), as that module explains.
+
 Effects: every contribution is kept only if the class of *its own* path is wanted (the base's and
 each offset's class are tracked separately); the early stop of ``radiance_path`` is not used, since
 an offset can reach a wanted class the base cannot.
@@ -37,8 +43,10 @@ from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lob
                                   sampled_lobe_class, vertex_class)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.gpt_shift import (BROKEN_MANIFOLD_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, I_PENDING, VIS_UNKNOWN,
-                                       nee_at_vis)
+from gdlearn.kernels.gpt_shift import (ALIVE, BROKEN_LOBE_CLASS, BROKEN_MANIFOLD_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL,
+                                       BROKEN_REVERSIBILITY, BROKEN_UNPAIRED, FAILED, I_PENDING, OUTSIDE, VIS_UNKNOWN,
+                                       follow_base, nee_at_vis, set_hit)
+from gdlearn.kernels.gpt_mixed import shift_segment_mixed, unpaired
 from gdlearn.kernels.gpt_shift import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                        I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                        I_STATE, JOINED, MERGED, FREE, conn, decide, emitted, get3,
@@ -54,29 +62,15 @@ from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.kernels.gpt_manifold import lookahead_chain, manifold_offset, same_shape
 from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
-                                   SHIFT_RECONNECT, record)
+                                   SHIFT_RECONNECT, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 
 ONE3 = (1.0, 1.0, 1.0)
-#: alive flags: shift not traced (outside the image), failed, alive
-OUTSIDE, FAILED, ALIVE = -1, 0, 1
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
-
-
-@njit(cache=True, error_model="numpy")
-def _set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
-    """Make (p, ng, ns) of primitive prim, reached along d, offset k's current vertex."""
-    set3(of, k, F_POS, p)
-    set3(of, k, F_NG, ng)
-    set3(of, k, F_NS, ns)
-    set3(of, k, F_WI, (-d[0], -d[1], -d[2]))
-    oi[k, I_ESCAPED] = 0 if hit else 1
-    oi[k, I_PRIM] = prim
-    oi[k, I_MAT] = sa.prim_info[prim, 1] if hit else -1
 
 
 @njit(cache=True, error_model="numpy")
@@ -89,7 +83,7 @@ def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
         ox, oy = offset_film_position(fx, fy, k)
         o, d, tmax = camera_ray(sa.camera, ox, oy)
         hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
-        _set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d)
+        set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d)
         set3(of, k, F_BETA, ONE3)
         of[k, F_LR] = 0.0
         of[k, F_PREV_PDF] = 1.0
@@ -142,7 +136,12 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, bro
     for k in range(4):
         co = (0.0, 0.0, 0.0)
         if oi[k, I_ALIVE] == ALIVE and oi[k, I_PENDING] == 0:
-            mat_o = sa.materials[oi[k, I_MAT]]
+            # (mixed policies) an offset that escaped, or sits on a delta-only vertex, has no next-event
+            # technique here: density 0, the base's sample keeps weight 1 (gpt_mixed)
+            mat_o = sa.materials[max(oi[k, I_MAT], 0)]
+            if (oi[k, I_ESCAPED] == 1 or bsdf_is_delta_only(mat_o)) and broken != BROKEN_UNPAIRED:
+                unpaired(diff, k, cb)
+                continue
             if _wanted(mask, pc_push(oi[k, I_STATE], vertex_class(mat_o, threshold))):
                 if oi[k, I_RECONN] == MERGED:
                     no = nb
@@ -154,32 +153,6 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, bro
                                        mat_o, stack, v)
                 co = mul3(get3(of, k, F_BETA), no)
         _pair(diff, of, oi, k, co, cb, broken)
-
-
-@njit(cache=True, error_model="numpy")
-def _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold):
-    """Offset k shares the base vertex p: same outgoing direction (J = 1). A JOINED offset arrives
-    from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
-    if oi[k, I_RECONN] == JOINED:
-        if delta:
-            oi[k, I_ALIVE] = FAILED
-            return
-        ns = get3(of, k, F_NS)
-        s, t = coordinate_system(ns)
-        wi_o = to_local(get3(of, k, F_WI), s, t, ns)
-        f = bsdf_eval(mat, wi_o, wo)
-        pdf_o = bsdf_pdf(mat, wi_o, wo)
-        _update(of, k, f, 1.0, pdf_o, pdf)
-        of[k, F_PREV_PDF] = pdf_o
-        oi[k, I_PREV_DELTA] = 0
-        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat, False, threshold))
-        oi[k, I_RECONN] = MERGED
-    else:                                   # identical to the base: f' / p = the base's weight
-        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight))
-        of[k, F_PREV_PDF] = pdf
-        oi[k, I_PREV_DELTA] = 1 if delta else 0
-        oi[k, I_STATE] = pc_push(oi[k, I_STATE], cls_b)
-    set3(of, k, F_PREV_P, p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -201,13 +174,16 @@ def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta
     wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, p, wi, wo, pdf, delta, us[0],
                                                      us[1], us[2], p2, ng2, threshold, broken, stack)
     if ok and action == SHIFT_RECONNECT:
-        _set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
+        set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
         oi[k, I_RECONN] = JOINED
     elif ok:
         hit, _, prim, q, ng, ns, _ = intersect(sa, offset_origin(p_o, ng_o, wo_w), wo_w, 0.0, math.inf, stack)
-        _set_hit(sa, of, oi, k, hit, prim, q, ng, ns, wo_w)
-        # the next vertices must agree in kind, else the reverse shift would choose differently
-        ok = conn(vclass_of(sa, not hit, prim, threshold)) == conn(cls_next) and hit == hit2
+        set_hit(sa, of, oi, k, hit, prim, q, ng, ns, wo_w)
+        # the next vertices must agree in kind, else the reverse shift would choose differently (this
+        # implies gpt_mixed.inverse_reconnects is False: y_{i+1} connectable only if x_{i+1} is, and then
+        # the base itself reconnected)
+        ok = conn(vclass_of(sa, not hit, prim, threshold)) == conn(cls_next) and hit == hit2 or \
+            broken == BROKEN_REVERSIBILITY
         # with manifold exploration a copied specular vertex must lie on the base's shape: then the
         # offset's chain qualifies for the manifold walk exactly when the base's does (gpt_manifold)
         if ok and hit and policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and cls_next == V_SPECULAR:
@@ -223,12 +199,15 @@ def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta
 
 
 @njit(cache=True, error_model="numpy")
-def _fail_mismatched(sa, mat, oi, stats, threshold):
+def _fail_mismatched(sa, mat, oi, stats, threshold, policy):
     """Before the base extends its vertex x_i (next event, next bounce), fail every offset whose x'_i
     is of another kind: escaped (no vertex to continue from), connectable vs not, or delta-only vs
     not (the neighbour's tracer would not even try next-event estimation there, so a next-event
     pair would get weight 1/2 with no backward partner). Each rule is symmetric in x_i and x'_i,
-    so the backward shift fails on the same pairs (STAR Sec. 3.5: weight 1, offset 0)."""
+    so the backward shift fails on the same pairs (STAR Sec. 3.5: weight 1, offset 0). Mixed policies
+    fail on none of these: their next-event pairs are formed per technique (gpt_mixed)."""
+    if is_mixed(policy):
+        return
     cb = conn(vertex_class(mat, threshold))
     db = bsdf_is_delta_only(mat)
     for k in range(4):
@@ -282,11 +261,12 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, 
 
 
 @njit(cache=True, error_model="numpy")
-def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, us, hit2, prim2, p2, ng2, ns2,
-                   d2, threshold, broken, stats, stack, mtab, m, cf, ci):
+def _shift_offsets(sa, of, oi, policy, mat, p, ng, ns, wi, wo, weight, pdf, delta, cls_b, cls_s, us, hit2, prim2, p2,
+                   ng2, ns2, d2, threshold, broken, stats, stack, mtab, m, cf, ci):
     """Extend every live offset by the segment the base just sampled (p -> p2 along d2). ``m`` > 0: the
     segment starts a qualifying specular chain of length m (cf, ci: :func:`gpt_manifold.lookahead_chain`),
-    and free offsets take the manifold shift."""
+    and free offsets take the manifold shift. ``cls_b``: the base lobe's effect class; ``cls_s``: its
+    class for the shift decisions (a function of the path, :mod:`gdlearn.shifts.policy`)."""
     for k in range(4):
         if oi[k, I_ALIVE] != ALIVE:
             continue
@@ -295,7 +275,7 @@ def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b
             continue
         if m > 0 and oi[k, I_RECONN] == FREE and oi[k, I_ESCAPED] == 0:
             mat_o = sa.materials[oi[k, I_MAT]]
-            if decide(policy, cls_b, vertex_class(mat_o, threshold), V_SPECULAR) == SHIFT_FAIL:
+            if decide(policy, cls_s, vertex_class(mat_o, threshold), V_SPECULAR) == SHIFT_FAIL:
                 record(stats, SHIFT_FAIL, False)
                 oi[k, I_ALIVE] = FAILED
                 continue
@@ -306,11 +286,14 @@ def _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b
                 oi[k, I_ALIVE] = FAILED
             continue
         if oi[k, I_RECONN] != FREE:
-            _follow(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
+            follow_base(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold)
             if oi[k, I_ALIVE] == ALIVE:
-                _set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
+                set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
+        elif is_mixed(policy):
+            shift_segment_mixed(sa, k, of, oi, policy, cls_s, mat, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2,
+                                p2, ng2, ns2, threshold, broken, stats, stack)
         else:
-            _shift_segment(sa, k, of, oi, policy, cls_b, cls_next_of(sa, hit2, prim2, threshold), p, wi, wo, pdf,
+            _shift_segment(sa, k, of, oi, policy, cls_s, cls_next_of(sa, hit2, prim2, threshold), p, wi, wo, pdf,
                            delta, us, hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
 
 
@@ -354,7 +337,7 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth
         if not hit or depth + 1 >= max_depth:
             break
         mat = sa.materials[sa.prim_info[prim, 1]]
-        _fail_mismatched(sa, mat, oi, stats, threshold)
+        _fail_mismatched(sa, mat, oi, stats, threshold, policy)
         sf, tf = coordinate_system(ns)
         wi_world = (-d[0], -d[1], -d[2])
         wi = to_local(wi_world, sf, tf, ns)
@@ -369,15 +352,16 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth
         if not pdf > 0.0:
             break
         cls_b = sampled_lobe_class(mat, wi, u_lobe, delta, threshold)
+        cls_s = cls_b if broken == BROKEN_LOBE_CLASS else lobe_class(mat, delta, threshold)
         d2 = to_world(wo, sf, tf, ns)
         hit2, _, prim2, p2, ng2, ns2, _ = intersect(sa, offset_origin(p, ng, d2), d2, 0.0, math.inf, stack)
         m = 0
-        if policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_b) and hit2 and \
+        if policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_s) and hit2 and \
                 vclass_of(sa, False, prim2, threshold) == V_SPECULAR and _any_free(oi):
             m = lookahead_chain(sa, mtab, hit2, prim2, p2, ng2, ns2, d2, seed, key, s, depth + 1, threshold, cf, ci,
                                 stack)
-        _shift_offsets(sa, of, oi, policy, mat, p, wi, wo, weight, pdf, delta, cls_b, (u_lobe, u1, u2), hit2, prim2,
-                       p2, ng2, ns2, d2, threshold, broken, stats, stack, mtab, m, cf, ci)
+        _shift_offsets(sa, of, oi, policy, mat, p, ng, ns, wi, wo, weight, pdf, delta, cls_b, cls_s, (u_lobe, u1, u2),
+                       hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack, mtab, m, cf, ci)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)
         prev_p, prev_pdf, prev_delta = p, pdf, delta

@@ -22,6 +22,7 @@ from numba import njit
 
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, lobe_class, vertex_class
+from gdlearn.kernels.pathclass import pc_push
 from gdlearn.kernels.lights import (E_AREA, E_POINT, E_SPOT, EM_AREA, EM_RGB, EM_TYPE, INV_FOUR_PI,
                                     E_CONSTANT, emitter_pdf, eval_emitter, spot_falloff)
 from gdlearn.kernels.sampling import power_heuristic
@@ -36,8 +37,14 @@ ZERO3 = (0.0, 0.0, 0.0)
 #: deliberately broken variants, for tests that must be able to fail: Eq. 17 weight 1 on both sides;
 #: the reconnection's solid-angle Jacobian replaced by 1; the half-vector copy's J_w replaced by 1;
 #: the offset's share of the MIS primal left unweighted (S_k = sum C' instead of sum w C'); the
-#: manifold shift's Jacobian |dx'_1/dx_1| replaced by 1
-BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN, BROKEN_PRIMAL, BROKEN_MANIFOLD_JACOBIAN = range(6)
+#: manifold shift's Jacobian |dx'_1/dx_1| replaced by 1; no reversibility check after a step that did
+#: not reconnect (an offset whose backward shift would reconnect keeps Eq. 17's weight); the shift
+#: decisions read the *sampled* lobe of a rough plastic (not a function of the path); a base technique
+#: the offset does not have (next event at a delta-only offset vertex) weighted by Eq. 17 instead of 1;
+#: a mixed policy's replayed direction or flight without its weight f'/p' (the replay Jacobian p_b / p'
+#: and the offset's own integrand dropped)
+(BROKEN_NONE, BROKEN_MIS, BROKEN_JACOBIAN, BROKEN_HV_JACOBIAN, BROKEN_PRIMAL, BROKEN_MANIFOLD_JACOBIAN,
+ BROKEN_REVERSIBILITY, BROKEN_LOBE_CLASS, BROKEN_UNPAIRED, BROKEN_REPLAY_WEIGHT) = range(10)
 #: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
 ESCAPED = -1
 
@@ -50,6 +57,9 @@ I_ALIVE, I_MAT, I_RECONN, I_PREV_DELTA, I_ESCAPED, I_STATE, I_PRIM, I_PENDING = 
 NI = 8
 # I_RECONN values: not yet joined, joined at this vertex (own incoming direction), identical to base
 FREE, JOINED, MERGED = 0, 1, 2
+#: I_ALIVE values: shift not traced (outside the image), failed (or ended: every later base technique
+#: is unpaired, weight 1), alive
+OUTSIDE, FAILED, ALIVE = -1, 0, 1
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -72,6 +82,18 @@ def mul3(a, b):
 @njit(cache=True, error_model="numpy", inline="always")
 def sc3(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(cache=True, error_model="numpy")
+def set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
+    """Make (p, ng, ns) of primitive prim, reached along d, offset k's current vertex."""
+    set3(of, k, F_POS, p)
+    set3(of, k, F_NG, ng)
+    set3(of, k, F_NS, ns)
+    set3(of, k, F_WI, (-d[0], -d[1], -d[2]))
+    oi[k, I_ESCAPED] = 0 if hit else 1
+    oi[k, I_PRIM] = prim
+    oi[k, I_MAT] = sa.prim_info[prim, 1] if hit else -1
 
 
 @njit(cache=True, error_model="numpy")
@@ -257,3 +279,29 @@ def _update(of, k, f, j, pdf_o, pdf_b):
     set3(of, k, F_BETA, sc3(mul3(get3(of, k, F_BETA), f), j / pdf_b))
     r = pdf_o * j / pdf_b
     of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
+
+
+@njit(cache=True, error_model="numpy")
+def follow_base(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold):
+    """Offset k shares the base vertex p: same outgoing direction (J = 1). A JOINED offset arrives
+    from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
+    if oi[k, I_RECONN] == JOINED:
+        if delta:
+            oi[k, I_ALIVE] = FAILED
+            return
+        ns = get3(of, k, F_NS)
+        s, t = coordinate_system(ns)
+        wi_o = to_local(get3(of, k, F_WI), s, t, ns)
+        f = bsdf_eval(mat, wi_o, wo)
+        pdf_o = bsdf_pdf(mat, wi_o, wo)
+        _update(of, k, f, 1.0, pdf_o, pdf)
+        of[k, F_PREV_PDF] = pdf_o
+        oi[k, I_PREV_DELTA] = 0
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat, False, threshold))
+        oi[k, I_RECONN] = MERGED
+    else:                                   # identical to the base: f' / p = the base's weight
+        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight))
+        of[k, F_PREV_PDF] = pdf
+        oi[k, I_PREV_DELTA] = 1 if delta else 0
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], cls_b)
+    set3(of, k, F_PREV_P, p)

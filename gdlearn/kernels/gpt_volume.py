@@ -32,21 +32,21 @@ from numba import njit, prange
 
 from gdlearn.kernels.bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                                   lobe_class, sampled_lobe_class, vertex_class)
-from gdlearn.kernels.bvh import STACK_SIZE, closest_hit
+from gdlearn.kernels.bvh import STACK_SIZE
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from gdlearn.kernels.gpt_shift import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED,
-                                       I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, FREE, conn, decide,
-                                       emitted, get3, mul3, sc3, set3, shift_direction, vclass_of)
-from gdlearn.kernels.gpt_volume_flight import (EV_ESCAPE, EV_FAIL, EV_SCATTER, EV_SURFACE, log_distance_pdf,
-                                               log_pass_probability, offset_flight)
+from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin
+from gdlearn.kernels.gpt_shift import (BROKEN_LOBE_CLASS, BROKEN_UNPAIRED, F_BETA, F_LR, F_NG, F_NS, F_POS,
+                                       F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM,
+                                       I_RECONN, I_STATE, FREE, conn, decide, emitted, get3, mul3, sc3, set3,
+                                       shift_direction, vclass_of)
+from gdlearn.kernels.gpt_volume_flight import EV_ESCAPE, EV_FAIL, EV_SCATTER, EV_SURFACE, base_flight, offset_flight
 from gdlearn.kernels.gpt_volume_vertex import (ALIVE, BROKEN_TRANSMITTANCE, F_D, F_O, F_TMAX, FAILED, I_KIND,
                                                I_MED, K_ESCAPED, K_MEDIUM, K_SURFACE, NFV, NIV, follow, nee_pairs,
                                                pair, push_medium_vertex, reconnect_offset, replay_phase,
                                                scale_log, set_ray, set_vertex, start_offsets, wanted)
 from gdlearn.kernels.layout import V_MEDIUM
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
-from gdlearn.kernels.medium import medium_params, sample_distance
+from gdlearn.kernels.medium import medium_params
 from gdlearn.kernels.pathclass import pc_init, pc_push
 from gdlearn.kernels.phase import hg_eval, hg_sample
 from gdlearn.kernels.rng import rand
@@ -54,49 +54,17 @@ from gdlearn.kernels.sampling import power_heuristic
 from gdlearn.kernels.surface_path import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
                                           D_MED_T, D_RR, dim)
 from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
-from gdlearn.kernels.volume_path import MAX_SEGMENTS, next_medium, shadow_transmittance
+from gdlearn.kernels.volume_path import next_medium, shadow_transmittance
 from gdlearn.scene.compile import borrowed
 from gdlearn.kernels.gpt_replay_policy import replay_sample
-from gdlearn.shifts.policy import POLICY_REPLAY, SHIFT_FAIL, SHIFT_RECONNECT, record
+from gdlearn.shifts.policy import POLICY_REPLAY, SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
+from gdlearn.kernels.gpt_mixed import unpaired
+from gdlearn.kernels.gpt_volume_mixed import shift_free_mixed
 
 ZERO3 = (0.0, 0.0, 0.0)
 ONE3 = (1.0, 1.0, 1.0)
 #: kind of the base vertex the next segment leaves
 VB_CAMERA, VB_SURFACE, VB_MEDIUM = 0, 1, 2
-
-
-@njit(cache=True, error_model="numpy")
-def base_flight(sa, o, d, tmax, medium, beta, seed, key, s, seg, stack):
-    """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
-    numbers and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
-    ns)``: W the product of the flight's weights, log p its density (pass probabilities and the
-    collision pdf, spectral MIS), tau the total distance, seg the segment the event belongs to."""
-    W = ONE3
-    lp = 0.0
-    tau = 0.0
-    while seg < MAX_SEGMENTS:
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
-        tmax = math.inf
-        if medium >= 0:
-            sig, alb, _ = medium_params(sa.media[medium])
-            ts, scattered, w = sample_distance(sig, alb, t, rand(seed, key, s, dim(seg, D_MED_CH)),
-                                               rand(seed, key, s, dim(seg, D_MED_T)))
-            beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
-            W = (W[0] * w[0], W[1] * w[1], W[2] * w[2])
-            if scattered:
-                p = (o[0] + ts * d[0], o[1] + ts * d[1], o[2] + ts * d[2])
-                return EV_SCATTER, seg, medium, beta, W, lp + log_distance_pdf(sig, ts), tau + ts, -1, p, ZERO3, ZERO3
-            lp += log_pass_probability(sig, t)
-        if prim < 0:
-            return EV_ESCAPE, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
-        p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
-        if not bsdf_is_null(sa.materials[sa.prim_info[prim, INFO_MAT]]):
-            return EV_SURFACE, seg, medium, beta, W, lp, tau + t, prim, p, ng, ns
-        medium = next_medium(sa.prim_info, prim, medium, d, ng)
-        o = offset_origin(p, ng, d)
-        tau += t
-        seg += 1
-    return EV_FAIL, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
 
 
 @njit(cache=True, error_model="numpy")
@@ -169,9 +137,13 @@ def _shift_free(sa, of, oi, k, policy, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_
 
 
 @njit(cache=True, error_model="numpy")
-def _shift_all(sa, of, oi, policy, vb, x_b, mat_b, wi_b, wo_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, us, ev,
-               prim2, p2, ng2, ns2, d, med2, tau, lp_b, W, threshold, broken, stats, stack):
-    """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``ev`` at p2)."""
+def _shift_all(sa, of, oi, policy, bv, ev, prim2, p2, ng2, ns2, d, med2, tau, lp_b, W, seg0, seg_b, seed, key, s,
+               threshold, broken, stats, stack):
+    """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``ev`` at p2). ``bv``: the
+    base vertex x_i the segment leaves, ``(vb, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, wo_bw, weight_b,
+    pdf_b, delta_b, cls_b, cls_s, us)`` (cls_b its lobe's effect class, cls_s its class for the shift
+    decisions); the base flight read the random numbers of segments seg0 .. seg_b."""
+    vb, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, cls_s, us = bv
     cls_next = V_MEDIUM if ev == EV_SCATTER else vclass_of(sa, ev == EV_ESCAPE, prim2, threshold)
     delta_next = ev == EV_SURFACE and bsdf_is_delta_only(sa.materials[sa.prim_info[prim2, INFO_MAT]])
     kind = K_SURFACE if ev == EV_SURFACE else (K_MEDIUM if ev == EV_SCATTER else K_ESCAPED)
@@ -184,9 +156,15 @@ def _shift_all(sa, of, oi, policy, vb, x_b, mat_b, wi_b, wo_b, wo_bw, weight_b, 
             if oi[k, I_ALIVE] == ALIVE:   # the same flight as the base: its weight
                 set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
                 set_vertex(sa, of, oi, k, kind, prim2, p2, ng2, ns2, d, med2)
-        elif not _shift_free(sa, of, oi, k, policy, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_b, us, ev, prim2, p2,
+        elif is_mixed(policy):
+            if not shift_free_mixed(sa, of, oi, k, policy, vb == VB_CAMERA, vb == VB_MEDIUM, x_b, ng_b, prim_b, med_b,
+                                    mat_b, wi_b, wo_b, pdf_b, delta_b, cls_s, us, ev, prim2, p2, ng2, ns2, med2,
+                                    cls_next, seg0, seg_b, seed, key, s, lp_b, threshold, broken, stats, stack):
+                oi[k, I_ALIVE] = FAILED
+        elif not _shift_free(sa, of, oi, k, policy, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_s, us, ev, prim2, p2,
                              ng2, ns2, med2, cls_next, delta_next, tau, lp_b, W, threshold, broken, stats, stack):
             oi[k, I_ALIVE] = FAILED
+    push_medium_vertex(oi)
 
 
 @njit(cache=True, error_model="numpy")
@@ -209,6 +187,9 @@ def _emission(sa, escaped, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, s
                     cb = (beta[0] * le[0] * w, beta[1] * le[1] * w, beta[2] * le[2] * w)
     for k in range(4):
         co = ZERO3
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_KIND] == K_MEDIUM and broken != BROKEN_UNPAIRED:
+            unpaired(diff, k, cb)    # (mixed policies) an offset at a medium vertex has no emitter hit here
+            continue
         if oi[k, I_ALIVE] == ALIVE and wanted(mask, oi[k, I_STATE]):
             wi = get3(of, k, F_WI)
             le = emitted(sa, oi[k, I_ESCAPED] == 1, oi[k, I_PRIM], get3(of, k, F_POS), get3(of, k, F_NS),
@@ -292,33 +273,35 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, r
     medium = sa.camera_medium
     beta, eta, state, L, depth, seg = ONE3, 1.0, pc_init(), ZERO3, 0, 0
     prev_p, prev_pdf, prev_delta = o, 1.0, True
-    # the base vertex the next segment leaves, as the shifts need it
-    vb, x_b, mat_b, wi_b, wo_b, wo_bw = VB_CAMERA, o, sa.materials[0], ZERO3, ZERO3, ZERO3
-    weight_b, pdf_b, delta_b, cls_b, us = ONE3, 1.0, False, 0, (0.0, 0.0, 0.0)
+    # the base vertex the next segment leaves, as the shifts need it (_shift_all)
+    bv = (VB_CAMERA, o, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, ZERO3, ONE3, 1.0, False, 0, 0,
+          (0.0, 0.0, 0.0))
     while True:
+        seg0 = seg
         ev, seg, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, seed, key,
                                                                            s, seg, stack)
         tmax = math.inf
         if ev == EV_FAIL:
             break
-        _shift_all(sa, of, oi, policy, vb, x_b, mat_b, wi_b, wo_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, us, ev,
-                   prim, p, ng, ns, d, medium, tau, lp_b, W, threshold, broken, stats, stack)
+        _shift_all(sa, of, oi, policy, bv, ev, prim, p, ng, ns, d, medium, tau, lp_b, W, seg0, seg, seed, key, s,
+                   threshold, broken, stats, stack)
         wi_w = (-d[0], -d[1], -d[2])
+        u_lobe = rand(seed, key, s, dim(seg, D_LOBE))    # also at a medium vertex: a replayed offset may need it
         if ev == EV_SCATTER:
             depth += 1
             if depth >= max_depth:
                 break
             state = pc_push(state, V_MEDIUM)
-            push_medium_vertex(oi)
             _, _, g = medium_params(sa.media[medium])
-            cb = _next_event(sa, p, ng, ns, -1, medium, mat_b, g, True, wi_w, beta, state, seed, key, s, seg, of,
+            cb = _next_event(sa, p, ng, ns, -1, medium, bv[5], g, True, wi_w, beta, state, seed, key, s, seg, of,
                              oi, diff, summ, mask, threshold, broken, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
             u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
             d2, pdf = hg_sample(g, wi_w, u1, u2)
             if not pdf > 0.0:
                 break
-            vb, x_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, us = VB_MEDIUM, p, d2, ONE3, pdf, False, V_MEDIUM, (0.0, u1, u2)
+            bv = (VB_MEDIUM, p, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, d2, ONE3, pdf, False, V_MEDIUM,
+                  V_MEDIUM, (u_lobe, u1, u2))
             o, d = p, d2
             prev_p, prev_pdf, prev_delta = p, pdf, False
         else:
@@ -334,7 +317,6 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, r
                 cb = _next_event(sa, p, ng, ns, prim, medium, mat, 0.0, False, wi_w, beta, state, seed, key, s, seg,
                                  of, oi, diff, summ, mask, threshold, broken, stack)
                 L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-            u_lobe = rand(seed, key, s, dim(seg, D_LOBE))
             u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
             wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, u1, u2)
             if not pdf > 0.0:
@@ -343,11 +325,13 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, r
             eta *= bsdf_eta(mat, wi, wo)
             d2 = to_world(wo, sf, tf, ns)
             o = offset_origin(p, ng, d2)
+            med_b = medium                    # the medium the base arrived in at p
             medium = next_medium(sa.prim_info, prim, medium, d2, ng)
             cls_b = sampled_lobe_class(mat, wi, u_lobe, is_delta, threshold)
+            cls_s = cls_b if broken == BROKEN_LOBE_CLASS else lobe_class(mat, is_delta, threshold)
             state = pc_push(state, cls_b)
-            vb, x_b, mat_b, wi_b, wo_b, wo_bw, weight_b = VB_SURFACE, p, mat, wi, wo, d2, weight
-            pdf_b, delta_b, us = pdf, is_delta, (u_lobe, u1, u2)
+            bv = (VB_SURFACE, p, ng, prim, med_b, mat, wi, wo, d2, weight, pdf, is_delta, cls_b, cls_s,
+                  (u_lobe, u1, u2))
             prev_p, prev_pdf, prev_delta = p, pdf, is_delta
             depth += 1
             d = d2

@@ -19,6 +19,10 @@ passing one passes. The shift fails when the offset's ray meets a non-null surfa
 the scene, or is in vacuum at tau (vertex kinds must match, as at surfaces); the rule is symmetric
 in base and offset, so the backward shift fails on the same pairs (STAR Sec. 3.5).
 
+:func:`base_flight` is volpath's own flight with its random numbers: the base path's, and -- run
+along an offset's ray with the base's numbers -- the *replayed* flight of the mixed policies
+(:mod:`gdlearn.kernels.gpt_volume_mixed`, STAR Sec. 3.1), whose event may be of another kind.
+
 Everything is returned in log form -- per-channel log f and the log density -- because dense media
 (sigma_t = 1e4) underflow T and P to 0 where their ratio f' / p_base is ordinary; the caller forms
 exp(log f'_c - log p_base) and the Eq. 17 log ratio from them.
@@ -30,13 +34,16 @@ from numba import njit
 from .bsdf import bsdf_is_null
 from .bvh import closest_hit
 from .geometry import INFO_MAT, offset_origin, surface
-from .medium import medium_params
+from .medium import medium_params, sample_distance
+from .rng import rand
 from .scene_query import SHADOW_EPS
+from .surface_path import D_MED_CH, D_MED_T, dim
 from .volume_path import MAX_SEGMENTS, next_medium
 
 #: flight events
 EV_SURFACE, EV_SCATTER, EV_ESCAPE, EV_FAIL = 0, 1, 2, 3
 ZERO3 = (0.0, 0.0, 0.0)
+ONE3 = (1.0, 1.0, 1.0)
 _LOG3 = math.log(3.0)
 
 
@@ -178,3 +185,37 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
         if remaining <= 0.0:
             break
     return False, lt, lp, medium
+
+
+@njit(cache=True, error_model="numpy")
+def base_flight(sa, o, d, tmax, medium, beta, seed, key, s, seg, stack):
+    """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
+    numbers and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
+    ns)``: W the product of the flight's weights, log p its density (pass probabilities and the
+    collision pdf, spectral MIS), tau the total distance, seg the segment the event belongs to."""
+    W = ONE3
+    lp = 0.0
+    tau = 0.0
+    while seg < MAX_SEGMENTS:
+        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        tmax = math.inf
+        if medium >= 0:
+            sig, alb, _ = medium_params(sa.media[medium])
+            ts, scattered, w = sample_distance(sig, alb, t, rand(seed, key, s, dim(seg, D_MED_CH)),
+                                               rand(seed, key, s, dim(seg, D_MED_T)))
+            beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
+            W = (W[0] * w[0], W[1] * w[1], W[2] * w[2])
+            if scattered:
+                p = (o[0] + ts * d[0], o[1] + ts * d[1], o[2] + ts * d[2])
+                return EV_SCATTER, seg, medium, beta, W, lp + log_distance_pdf(sig, ts), tau + ts, -1, p, ZERO3, ZERO3
+            lp += log_pass_probability(sig, t)
+        if prim < 0:
+            return EV_ESCAPE, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
+        p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
+        if not bsdf_is_null(sa.materials[sa.prim_info[prim, INFO_MAT]]):
+            return EV_SURFACE, seg, medium, beta, W, lp, tau + t, prim, p, ng, ns
+        medium = next_medium(sa.prim_info, prim, medium, d, ng)
+        o = offset_origin(p, ng, d)
+        tau += t
+        seg += 1
+    return EV_FAIL, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3

@@ -12,12 +12,13 @@ import math
 
 from numba import njit
 
-from gdlearn.kernels.bsdf import bsdf_eval, bsdf_pdf, lobe_class, vertex_class
+from gdlearn.kernels.bsdf import bsdf_eval, bsdf_is_delta_only, bsdf_pdf, lobe_class, vertex_class
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.gpt_shift import (BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P,
-                                       F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM,
-                                       I_RECONN, I_STATE, JOINED, MERGED, FREE, NF, NI, get3, light_weight,
-                                       mul3, sc3, set3)
+from gdlearn.kernels.gpt_mixed import unpaired
+from gdlearn.kernels.gpt_shift import (BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, BROKEN_UNPAIRED, F_BETA, F_LR,
+                                       F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT,
+                                       I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, JOINED, MERGED, FREE, NF, NI, get3,
+                                       light_weight, mul3, sc3, set3)
 from gdlearn.kernels.layout import V_MEDIUM
 from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE
 from gdlearn.kernels.medium import medium_params
@@ -167,8 +168,14 @@ def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, mask, medium_vertex,
     for k in range(4):
         co = ZERO3
         if oi[k, I_ALIVE] == ALIVE:
+            kind = oi[k, I_KIND]
+            # (mixed policies) no next-event technique at an escaped or delta-only offset vertex: weight 1
+            if (kind == K_ESCAPED or (kind == K_SURFACE and bsdf_is_delta_only(sa.materials[max(oi[k, I_MAT], 0)]))) \
+                    and broken != BROKEN_UNPAIRED:
+                unpaired(diff, k, cb)
+                continue
             st = oi[k, I_STATE]
-            if not medium_vertex:
+            if kind == K_SURFACE:        # the offset's own vertex (of the base's kind unless mixed)
                 st = pc_push(st, vertex_class(sa.materials[oi[k, I_MAT]], threshold))
             if wanted(mask, st):
                 if oi[k, I_RECONN] == MERGED:
@@ -282,7 +289,8 @@ def follow(sa, of, oi, k, vb_medium, mat_b, wo_b_local, wo_b, weight_b, pdf_b, d
 
 @njit(cache=True, error_model="numpy")
 def push_medium_vertex(oi):
-    """Every live offset has reached a medium vertex with the base: its class joins the path state."""
+    """Every live offset that has just reached a medium vertex (with the base, or on its own under a
+    mixed policy's replayed flight): its class joins the path state."""
     for k in range(4):
-        if oi[k, I_ALIVE] == ALIVE:
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_KIND] == K_MEDIUM:
             oi[k, I_STATE] = pc_push(oi[k, I_STATE], V_MEDIUM)

@@ -13,9 +13,34 @@ classes of x_b, x'_b and the next base vertex x_{b+1} and picks one action for t
 * ``SHIFT_FAIL`` -- the vertex classes of base and offset disagree (one connectable, the other not):
   the shift is not invertible there (Kettunen et al. 2015); weight 1 / zero offset (Sec. 3.5).
 
-Policies (names for ``--shift``): ``replay``, ``replay+reconnection``, ``halfvector+reconnection``
-and ``halfvector+reconnection+manifold``. The vertex classes come from ``bsdf.vertex_class(mat,
-threshold)`` / ``lobe_class``, so the roughness threshold is configurable there.
+Policies (names for ``--shift``): ``replay``, ``replay+reconnection``, ``halfvector+reconnection``,
+``halfvector+reconnection+manifold`` and ``halfvector+replay+reconnection``. The vertex classes come
+from ``bsdf.vertex_class(mat, threshold)`` / ``lobe_class``, so the roughness threshold is
+configurable there; the class of a *base* vertex is the class of the lobe its sampled direction
+belongs to as a function of the path (``lobe_class``: specular for a delta direction, else the
+material's class), never the random lobe choice of a rough plastic, whose two non-delta lobes can
+both produce the same direction: a decision that depended on that choice would not be a function of
+the path, and the inverse shift, which sees only the path, could not repeat it.
+
+Reversibility (STAR Sec. 3.5, Fig. 4). Eq. 17's weights of a forward shift T and of the backward
+shift of the same pair sum to one only if the backward shift, run from the offset path y = T(x)
+towards the base pixel, makes the same decision at every vertex and so returns x. Reconnection is
+symmetric: the criterion "x_b, x'_b and the next vertex connectable, and the segment to it free" reads
+the same from y, whose next vertex *is* x_{b+1}. Any other action leaves the offset at a vertex
+y_{b+1} of its own, and the backward shift then asks the criterion about x_b, y_b and y_{b+1}: if it
+holds there, the backward shift would reconnect x_b to y_{b+1} instead of returning x, so the forward
+shift must be declared failed. The kernels run that check after every non-reconnecting step
+(:func:`gdlearn.kernels.gpt_mixed.inverse_reconnects`; Kettunen et al.'s policies use the stronger
+rule "the next vertices agree in class", which implies it).
+
+Mixed policies (:func:`is_mixed`): ``replay+reconnection`` -- the STAR's "simple but effective
+approach to improve robustness" (Sec. 3.5) -- reconnects wherever the criterion holds and replays the
+base's random numbers everywhere else, *including* where base and offset disagree in class: replay is
+the identity in primary sample space, so it is reversible for any vertex kinds and needs no matching.
+It fails only where the backward shift would reconnect (above). ``halfvector+replay+reconnection``
+is the same with the half-vector copy where base and offset are both non-connectable (glossy below
+the threshold, specular). Kettunen et al.'s ``halfvector+reconnection`` keeps its published rule:
+fail on a class mismatch.
 
 The integrators count what ran in a stats vector indexed by the ``STAT_*`` constants below
 (:func:`record`), so every frame can report which shifts ran, succeeded and failed.
@@ -31,11 +56,13 @@ POLICY_REPLAY = 0
 POLICY_REPLAY_RECONNECTION = 1
 POLICY_HALFVECTOR_RECONNECTION = 2
 POLICY_HALFVECTOR_RECONNECTION_MANIFOLD = 3
+POLICY_HALFVECTOR_REPLAY_RECONNECTION = 4
 
 POLICIES = {"replay": POLICY_REPLAY,
             "replay+reconnection": POLICY_REPLAY_RECONNECTION,
             "halfvector+reconnection": POLICY_HALFVECTOR_RECONNECTION,
-            "halfvector+reconnection+manifold": POLICY_HALFVECTOR_RECONNECTION_MANIFOLD}
+            "halfvector+reconnection+manifold": POLICY_HALFVECTOR_RECONNECTION_MANIFOLD,
+            "halfvector+replay+reconnection": POLICY_HALFVECTOR_REPLAY_RECONNECTION}
 
 # --- actions ---------------------------------------------------------------------------------
 SHIFT_REPLAY = 0
@@ -74,19 +101,44 @@ def specular_chain_end(vclass, start, n):
     return i
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def is_mixed(policy):
+    """True for the policies that replay instead of failing on a class mismatch (module docstring)."""
+    return policy == POLICY_REPLAY_RECONNECTION or policy == POLICY_HALFVECTOR_REPLAY_RECONNECTION
+
+
+@njit(cache=True, error_model="numpy")
+def mixed_action(policy, conn_b, conn_o):
+    """A mixed policy's action where no reconnection runs: the half-vector copy under
+    ``halfvector+replay+reconnection`` when neither the base nor the offset vertex is connectable
+    (both glossy below the threshold or specular, Sec. 3.2), random replay otherwise (Sec. 3.1).
+    ``conn_b`` / ``conn_o``: is the base / offset vertex connectable. Symmetric in the two, so the
+    backward shift, which swaps them, chooses the same action."""
+    if policy == POLICY_HALFVECTOR_REPLAY_RECONNECTION and not conn_b and not conn_o:
+        return SHIFT_HALFVECTOR
+    return SHIFT_REPLAY
+
+
 @njit(cache=True, error_model="numpy")
 def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
     """The action for the segment leaving vertex b >= 1 (module docstring); the primary segment
     (sensor -> x_1) is shifted by the pixel offset itself, which the integrator does.
 
     ``vclass_base`` holds the base path's vertex classes (n valid vertices); ``class_b_offset`` is
-    the class of the already shifted offset vertex x'_b.
+    the class of the already shifted offset vertex x'_b. This is the decision table alone: the
+    kernels add the visibility of the reconnecting segment and the reversibility check of the step
+    that did not reconnect (module docstring).
     """
     cb = connectable(class_b)
-    if cb != connectable(class_b_offset):
-        return SHIFT_FAIL
-    if policy == POLICY_REPLAY:
+    co = connectable(class_b_offset)
+    if policy == POLICY_REPLAY:          # the identity in primary sample space: never a mismatch
         return SHIFT_REPLAY
+    if is_mixed(policy):
+        if cb and co and (b + 1 >= n or connectable(vclass_base[b + 1])):
+            return SHIFT_RECONNECT
+        return mixed_action(policy, cb, co)
+    if cb != co:
+        return SHIFT_FAIL
     if b + 1 >= n:
         # no next base vertex: the segment to a light sample (next-event estimation) is reconnected
         # from a connectable vertex; from a specular one it can only follow the copied direction
