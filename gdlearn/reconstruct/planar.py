@@ -18,7 +18,7 @@ from numba import prange
 
 from ._jit import kernel
 
-__all__ = ["to_planar", "from_planar", "apply_planar", "pcg_planar"]
+__all__ = ["to_planar", "from_planar", "apply_planar", "planar_operator", "pcg_planar"]
 
 
 def to_planar(a, dtype=np.float64):
@@ -103,15 +103,31 @@ def _direction(p, z, beta):
                 pr[i] = zr[i] + bk * pr[i]
 
 
-def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False):
+def planar_operator(w0, wx, wy):
+    """The operator argument of :func:`pcg_planar` for natural-layout weights."""
+    return lambda p, out: apply_planar(p, w0, wx, wy, out)
+
+
+def _rows(a):
+    """A C x (H+2) x ... vector as C x (H+2) x row (a view): the vector kernels are layout-blind."""
+    return a.reshape(a.shape[0], a.shape[1], -1)
+
+
+def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False,
+               x=None):
     """Preconditioned CG on ``A d = b`` from d = 0, one independent system per channel, in the
-    dtype of ``b`` (float32 or float64). Stops when ||b - A d|| <= tol * bnorm (bnorm defaults to
-    ||b||) or after ``maxiter`` steps. Returns (d, history of ||b - A d|| / bnorm, steps).
-    ``overwrite_b``: use ``b`` as the residual's storage (saves a copy)."""
-    d = np.zeros_like(b)
+    dtype of ``b`` (float32 or float64), for the padded layouts (natural or :mod:`.split`).
+    ``operator(p, out)`` writes A p into out's interior and returns p^T A p per channel
+    (:func:`planar_operator`, :func:`.split.split_operator`). Stops when ||b - A d|| <= tol *
+    bnorm (bnorm defaults to ||b||) or after ``maxiter`` steps. Returns (d, history of
+    ||b - A d|| / bnorm, steps). ``overwrite_b``: use ``b`` as the residual's storage (saves a
+    copy). ``x``: add the steps to this array instead (e.g. the float64 iterate of an outer
+    iterative refinement: no separate ``x += d`` pass) and return it as d."""
+    d = np.zeros_like(b) if x is None else x
     r = b if overwrite_b else b.copy()
-    ap = np.zeros_like(b)             # apply_planar writes the interior: the frame stays 0
-    rr = _dot(r, r)
+    ap = np.zeros_like(b)             # the operator writes the interior: the frame stays 0
+    d3, r3, ap3 = _rows(d), _rows(r), _rows(ap)
+    rr = _dot(r3, r3)
     if bnorm is None:
         bnorm = float(np.sqrt(rr.sum()))
     if bnorm == 0.0:
@@ -124,12 +140,12 @@ def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwri
     # p may alias the preconditioner's output buffer until a second step needs z again: IRLS
     # mostly stops after one step, and the copy is a full pass over the vectors
     p = z if z is not r else z.copy()     # (an identity preconditioner returns r itself)
-    rz = _dot(r, z)
+    rz = _dot(r3, _rows(z))
     while True:
-        pap = apply_planar(p, w0, wx, wy, ap)
+        pap = operator(p, ap)
         # a channel whose residual is already exactly 0 has pAp = 0: leave it alone
         a = np.where(pap > 0.0, rz / np.where(pap > 0.0, pap, 1.0), 0.0)
-        rr = _update(d, r, p, ap, a)
+        rr = _update(d3, r3, _rows(p), ap3, a)
         it += 1
         history.append(float(np.sqrt(rr.sum())) / bnorm)
         if it >= maxiter or history[-1] <= tol:
@@ -137,8 +153,8 @@ def pcg_planar(b, w0, wx, wy, precond, tol=1e-2, maxiter=50, bnorm=None, overwri
         if p is z:
             p = z.copy()
         z = precond(r)
-        rz_new = _dot(r, z)
+        rz_new = _dot(r3, _rows(z))
         beta = np.where(rz > 0.0, rz_new / np.where(rz > 0.0, rz, 1.0), 0.0)
-        _direction(p, z, beta)
+        _direction(_rows(p), _rows(z), beta)
         rz = rz_new
     return d, np.asarray(history), it

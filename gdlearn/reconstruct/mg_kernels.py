@@ -1,0 +1,222 @@
+"""The stencils of the multigrid V-cycle (:mod:`.multigrid`) on the split layout of :mod:`.split`:
+smoothers (red-black SOR, damped Jacobi), residual + restriction, prolongation, coarsening and
+the inverse diagonal of ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy`` (Eq. 18-19, weighted form).
+
+Every kernel takes the level's interior width ``w`` and writes interior values only (the frame of
+vectors and weights stays 0, see :mod:`.split`). Transfers between a level and the next coarser one
+go through a natural-order coarse row buffer: coarse column Xc covers fine columns 2 Xc - 1 (odd
+half, index Xc - 1) and 2 Xc (even half, index Xc), so a coarse row is ``odd[i] + even[1 + i]``
+for i < Wc in the fine halves -- two contiguous slices -- and is then split into its own halves.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from ._jit import kernel
+from .split import half_count
+
+#: Row-parallel kernels that need a row buffer split the rows into this many chunks and make one
+#: buffer per chunk (made per row, the allocations cost ~10 % of a sweep at 1280 x 720).
+CHUNKS = 16
+
+
+@njit(cache=True, fastmath=True)
+def _sor_half(zs, zl, zr, zu, zd, bs, wxs, wxl, wys, wyu, ids, om, n):
+    """SOR on one half row: z += om (D^-1 (b + sum of the weighted neighbours) - z)."""
+    for i in range(n):
+        t = (bs[i] + wxs[i] * zr[i] + wxl[i] * zl[i] + wys[i] * zd[i] + wyu[i] * zu[i]) * ids[i]
+        zs[i] += om * (t - zs[i])
+
+
+@kernel(fastmath=True)
+def rb_sweep(z, b, wx, wy, invd, colour, om, w):
+    """SOR (``om`` x the Gauss-Seidel step; om = 1: Gauss-Seidel), in place, on the pixels with
+    (X + Y) % 2 == colour -- half ``(colour + Y) % 2`` of row Y. Their four neighbours have the
+    other colour, so rows are independent (parallel) and the order does not matter. ``om`` has
+    the vectors' dtype (a float64 scalar would widen a float32 loop to float64)."""
+    c, hp = z.shape[0], z.shape[1]
+    cw = wx.shape[0]
+    for y in prange(1, hp - 1):
+        h = (colour + y) % 2
+        q = 1 - h
+        n = half_count(h, w)
+        for k in range(c):
+            kw = k if cw > 1 else 0
+            _sor_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:], z[k, y - 1, h, q:],
+                      z[k, y + 1, h, q:], b[k, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q],
+                      wy[kw, y, h, q:], wy[kw, y - 1, h, q:], invd[kw, y, h, q:], om, n)
+
+
+@kernel(fastmath=True)
+def rb_first(z, b, invd, om):
+    """The first red sweep from z = 0: z = om D^-1 b on colour 0, 0 on colour 1 (whole rows; the
+    frame gets om D^-1 b = 0, so z needs no zeroing first)."""
+    c, hp, _, wh = z.shape
+    cw = invd.shape[0]
+    for y in prange(1, hp - 1):
+        h = y % 2
+        for k in range(c):
+            kw = k if cw > 1 else 0
+            zr, zo, br, idr = z[k, y, h], z[k, y, 1 - h], b[k, y, h], invd[kw, y, h]
+            for i in range(wh):
+                zr[i] = om * br[i] * idr[i]
+            for i in range(wh):
+                zo[i] = 0.0
+
+
+@njit(cache=True, fastmath=True)
+def _residual_half(zs, zl, zr, zu, zd, bs, w0s, wxs, wxl, wys, wyu, out, n):
+    """out = b - A z on one half row."""
+    for i in range(n):
+        pc = zs[i]
+        out[i] = bs[i] - (w0s[i] * pc + wxs[i] * (pc - zr[i]) + wxl[i] * (pc - zl[i])
+                          + wys[i] * (pc - zd[i]) + wyu[i] * (pc - zu[i]))
+
+
+@njit(cache=True, fastmath=True)
+def _jacobi_half(zs, zl, zr, zu, zd, bs, w0s, wxs, wxl, wys, wyu, ids, omega, out, n):
+    """out = z + omega D^-1 (b - A z) on one half row."""
+    for i in range(n):
+        pc = zs[i]
+        v = (w0s[i] * pc + wxs[i] * (pc - zr[i]) + wxl[i] * (pc - zl[i])
+             + wys[i] * (pc - zd[i]) + wyu[i] * (pc - zu[i]))
+        out[i] = pc + omega * ids[i] * (bs[i] - v)
+
+
+@kernel(fastmath=True)
+def jacobi(z, b, w0, wx, wy, invd, omega, out, w):
+    """One damped Jacobi sweep: out = z + omega D^-1 (b - A z) on the interior."""
+    c, hp = z.shape[0], z.shape[1]
+    cw = w0.shape[0]
+    for y in prange(1, hp - 1):
+        for k in range(c):
+            kw = k if cw > 1 else 0
+            for h in range(2):
+                q = 1 - h
+                _jacobi_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:], z[k, y - 1, h, q:],
+                             z[k, y + 1, h, q:], b[k, y, h, q:], w0[kw, y, h, q:],
+                             wx[kw, y, h, q:], wx[kw, y, q], wy[kw, y, h, q:],
+                             wy[kw, y - 1, h, q:], invd[kw, y, h, q:], omega,
+                             out[k, y, h, q:], half_count(h, w))
+
+
+@kernel(fastmath=True)
+def scaled(b, invd, omega, out):
+    """The first Jacobi sweep from z = 0: out = omega D^-1 b (the frame gets 0)."""
+    c, hp, _, wh = b.shape
+    cw = invd.shape[0]
+    for y in prange(hp):
+        for k in range(c):
+            kw = k if cw > 1 else 0
+            for h in range(2):
+                br, idr, outr = b[k, y, h], invd[kw, y, h], out[k, y, h]
+                for i in range(wh):
+                    outr[i] = omega * idr[i] * br[i]
+
+
+@njit(cache=True)
+def _split_row(t, out):
+    """Natural-order coarse row t -> its two halves out[0], out[1]."""
+    for j in range(out.shape[1]):
+        out[0, j] = t[2 * j]
+        out[1, j] = t[2 * j + 1]
+
+
+@kernel(fastmath=True)
+def residual_restrict(z, b, w0, wx, wy, rc, w):
+    """rc = P^T (b - A z): the residual summed over 2 x 2 blocks, one coarse row at a time."""
+    c, hp, _, wh = z.shape
+    cw = w0.shape[0]
+    hcp, whc = rc.shape[1], rc.shape[3]
+    wc = (w + 1) // 2
+    nch = min(CHUNKS, hcp)
+    for j in prange(nch):
+        res = np.zeros((2, wh), dtype=rc.dtype)      # slots never written stay 0 (frame)
+        tmp = np.zeros(2 * whc, dtype=rc.dtype)
+        for yc in range(j * hcp // nch, (j + 1) * hcp // nch):
+            for k in range(c):
+                if yc == 0 or yc == hcp - 1:
+                    rc[k, yc] = 0.0
+                    continue
+                kw = k if cw > 1 else 0
+                tmp[:] = 0.0
+                for y in range(2 * yc - 1, min(2 * yc + 1, hp - 1)):
+                    for h in range(2):
+                        q = 1 - h
+                        _residual_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:],
+                                       z[k, y - 1, h, q:], z[k, y + 1, h, q:], b[k, y, h, q:],
+                                       w0[kw, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q],
+                                       wy[kw, y, h, q:], wy[kw, y - 1, h, q:], res[h, q:],
+                                       half_count(h, w))
+                    r1, r0 = res[1], res[0, 1:]
+                    for i in range(wc):
+                        tmp[1 + i] += r1[i] + r0[i]
+                _split_row(tmp, rc[k, yc])
+
+
+@kernel
+def prolong_add(z, ec, w):
+    """z += P ec on the interior: fine even column 2 + 2 i and odd column 1 + 2 i both lie in coarse
+    column 1 + i."""
+    c, hp = z.shape[0], z.shape[1]
+    whc = ec.shape[3]
+    n = hp - 2
+    nch = min(CHUNKS, n)
+    for j in prange(nch):
+        t = np.empty(2 * whc, dtype=ec.dtype)
+        for y in range(1 + j * n // nch, 1 + (j + 1) * n // nch):
+            for k in range(c):
+                er = ec[k, (y + 1) // 2]
+                for i in range(whc):
+                    t[2 * i] = er[0, i]
+                    t[2 * i + 1] = er[1, i]
+                for h in range(2):
+                    zs, ts = z[k, y, h, 1 - h:], t[1:]
+                    for i in range(half_count(h, w)):
+                        zs[i] += ts[i]
+
+
+@kernel
+def coarsen(w0, wx, wy, factor, c0, cx, cy, w):
+    """Coarse weights (split layout): block sums of w0; a coarse edge = factor x the two fine edges
+    it crosses (see :mod:`.multigrid`). Fine values past the interior are the zero frame."""
+    cw, hcp, _, whc = c0.shape
+    wc = (w + 1) // 2
+    nch = min(CHUNKS, hcp)
+    for j in prange(nch):
+        t = np.zeros(2 * whc, dtype=c0.dtype)        # t[0] and t[wc + 1:] stay 0 (frame)
+        for yc in range(j * hcp // nch, (j + 1) * hcp // nch):
+            for k in range(cw):
+                if yc == 0 or yc == hcp - 1:
+                    c0[k, yc] = 0.0
+                    cx[k, yc] = 0.0
+                    cy[k, yc] = 0.0
+                    continue
+                y = 2 * yc - 1
+                for i in range(wc):
+                    t[1 + i] = (w0[k, y, 1, i] + w0[k, y, 0, 1 + i] + w0[k, y + 1, 1, i]
+                                + w0[k, y + 1, 0, 1 + i])
+                _split_row(t, c0[k, yc])
+                for i in range(wc):
+                    t[1 + i] = factor * (wx[k, y, 0, 1 + i] + wx[k, y + 1, 0, 1 + i])
+                _split_row(t, cx[k, yc])
+                for i in range(wc):
+                    t[1 + i] = factor * (wy[k, y + 1, 1, i] + wy[k, y + 1, 0, 1 + i])
+                _split_row(t, cy[k, yc])
+
+
+@kernel
+def inverse_diagonal(w0, wx, wy, out, w):
+    """1 / diag(A) where the diagonal is > 0, else 0 (a pixel with no term is in A's null space);
+    interior only (``out`` must come zeroed)."""
+    cw, hp = w0.shape[0], w0.shape[1]
+    for y in prange(1, hp - 1):
+        for k in range(cw):
+            for h in range(2):
+                q = 1 - h
+                w0s, wxs, wxl = w0[k, y, h, q:], wx[k, y, h, q:], wx[k, y, q]
+                wys, wyu, outs = wy[k, y, h, q:], wy[k, y - 1, h, q:], out[k, y, h, q:]
+                for i in range(half_count(h, w)):
+                    d = w0s[i] + wxs[i] + wxl[i] + wys[i] + wyu[i]
+                    outs[i] = 1.0 / d if d > 0.0 else 0.0
