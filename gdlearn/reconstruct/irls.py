@@ -46,7 +46,7 @@ from .split import from_split, half_count, split_operator, split_shape, to_split
 __all__ = ["irls_multigrid"]
 
 
-@kernel(fastmath=True)
+@kernel(fastmath=True, error_model="numpy")
 def irls_pass(img, i0, gx, gy, alpha, v0, vx, vy, eps, full, w0, wx, wy, invd, r, nch,
               complete, w):
     """One sweep over the data from the current iterate ``img`` (split layout float64, interior
@@ -96,7 +96,7 @@ def _validity_rows(y, hp, complete):
     return y, y, y, y - 1
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _squares_half(e0, ex, ey, ic, ir, idn, i0s, gxs, gys, v0s, vxs, vys, alpha, n):
     """Add one channel's squared residuals (times validity) of one half row to e0, ex, ey."""
     for i in range(n):
@@ -109,7 +109,7 @@ def _squares_half(e0, ex, ey, ic, ir, idn, i0s, gxs, gys, v0s, vxs, vys, alpha, 
         ey[i] += vys[i] * ddy * ddy
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy, lens, with_eu, complete, w):
     """Row y of irls_pass: colour lengths of the residuals into lens (e0, ex, ey; with
     ``with_eu`` also eu, the edge above (y-1, x) - (y, x), else lens[3] must hold row y-1's ey
@@ -154,7 +154,7 @@ def _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy, lens, with_eu, complete,
     return tot, big
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _q_half(out, e, v, scale, ie, n):
     """IRLS weights scale v / (1 + e / eps) of one half row, in float32: twice the SIMD width of
     float64 divisions, and 1 + e / eps >= 1 cannot divide by 0 whatever eps is."""
@@ -163,7 +163,7 @@ def _q_half(out, e, v, scale, ie, n):
         out[i] = scale * np.float32(v[i]) / (one + np.float32(e[i] * ie))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _residual_half(rs, i0s, ic, il, ir, iu, idn, gxs, gxl, gys, gyu, q0, qxs, qxl, qys, qyu, n):
     """r = W0 (I0 - x) - Dx^T Wx (Dx x - Gx) - Dy^T Wy (Dy x - Gy) on one half row (float64
     arithmetic; the data rows are cache-resident, cheaper to reread than to store residuals)."""
@@ -174,7 +174,7 @@ def _residual_half(rs, i0s, ic, il, ir, iu, idn, gxs, gxl, gys, gyu, q0, qxs, qx
                  - qyu[i] * (c - iu[i] - gyu[i]))
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _weights_row(y, i0, img, gx, gy, lens, q, a2, eps, v0, vx, vy, w0, wx, wy, invd, r,
                  complete, w):
     """Row y of irls_pass's weights ``1 / (1 + |e| / eps)``, inverse diagonal and residual, from
