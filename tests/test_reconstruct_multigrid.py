@@ -118,6 +118,15 @@ def test_vcycle_reduces_the_residual_and_pcg_converges():
     ad = np.zeros_like(d)
     op(d, ad)
     assert np.linalg.norm(r - ad) <= 1.0001e-8 * np.linalg.norm(r)   # history tells the truth
+    # loose tolerances (IRLS's 0.5): the last step's residual norm is predicted, r^T r -
+    # 2 a r^T A p + a^2 |A p|^2, not measured; it must still be the true one (float64
+    # round-off after cancellation of at most 1/4 of r^T r: asserted to 1e-9 relative)
+    for loose in (0.5, 0.05):
+        dl, hl, _ = pcg_planar(r, op, mg, tol=loose, maxiter=200)
+        adl = np.zeros_like(dl)
+        op(dl, adl)
+        true = np.linalg.norm(r - adl) / np.linalg.norm(r)
+        assert hl[-1] <= loose and abs(hl[-1] - true) <= 1e-9 * true
     # accumulating into a float64 iterate (as IRLS does) takes the same steps from x0
     x0 = to_split(rng.standard_normal((h, w, c)))
     x, hist_x, it_x = pcg_planar(r, op, mg, tol=1e-8, maxiter=200, x=x0.copy())
@@ -241,8 +250,10 @@ def test_fused_irls_pass_matches_separate_computation(complete, h, w):
     r = np.zeros(split_shape(c, h, w))
     sx = to_split(x)
     for nch in (1, 3):                       # chunks: the edge above is recomputed at each start
-        energy, emax = irls_pass(sx, si0, sgx, sgy, alpha, sv0, svx, svy, eps, True, *wts, invd,
-                                 r, nch, complete, w)
+        energy, emax, rr = irls_pass(sx, si0, sgx, sgy, alpha, sv0, svx, svy, eps, True, *wts,
+                                     invd, r, nch, complete, w)
+        # r^T r per channel: the same squares summed in another order
+        assert np.allclose(rr, (r ** 2).sum(axis=(1, 2, 3)), rtol=1e-12, atol=0)
         # sums of ~450 lengths ~1 in another order: round-off only
         assert abs(energy - l1_energy(*e)) <= 1e-12 * energy
         assert emax == pytest.approx(max(a.max() for a in e), rel=1e-12)

@@ -93,10 +93,16 @@ def test_apply_split_equals_natural_operator(h, w, cw):
     pap_n = apply_planar(z, w0, wx, wy, out_n)
     sw = [spl(a) for a in (w0, wx, wy)]
     out_s = np.zeros(split_shape(3, h, w))
-    pap_s = apply_split(spl(z), *sw, out_s, w)
+    r = np.random.default_rng(7).standard_normal((h, w, 3))
+    sums = apply_split(spl(z), *sw, out_s, w, to_split(r))
     # the same products summed in another order: round-off only (values ~1e2 at most)
     assert np.abs(nat(out_s, w) - out_n).max() < 1e-11
-    assert np.allclose(pap_s, pap_n, rtol=1e-12, atol=1e-12)
+    assert np.allclose(sums[0], pap_n, rtol=1e-12, atol=1e-12)
+    zi, ai = z[:, 1:-1, 1:-1], out_n[:, 1:-1, 1:-1]
+    rk = np.moveaxis(r, 2, 0)
+    for got, want in zip(sums[1:], ((rk * zi).sum(axis=(1, 2)), (rk * ai).sum(axis=(1, 2)),
+                                    (ai * ai).sum(axis=(1, 2)))):
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
     assert frame_is_zero(out_s, w)
 
 

@@ -67,9 +67,11 @@ def irls_pass(img, i0, gx, gy, alpha, v0, vx, vy, eps, full, w0, wx, wy, invd, r
     ``complete``: v0, vx, vy are 1 x 2 x 2 x Wh -- row 1 the validity of every interior row, row
     0 zeros (the masked last row of gy, the frame above the first) -- instead of full arrays
     (see :func:`split_problem`). Outputs are written on the interior only: their frames must be 0
-    (they are allocated zeroed once). Returns (energy, largest length)."""
+    (they are allocated zeroed once). Returns (energy, largest length, r^T r per channel -- 0
+    without ``full``)."""
     c, hp, _, wh = img.shape
     rows = np.zeros((hp, 2))
+    rr = np.zeros((hp, c))
     # row buffers are made once per chunk of rows (nch chunks): made per row they cost as much
     # as the sweep
     nch = max(1, min(nch, hp - 2))
@@ -83,9 +85,9 @@ def irls_pass(img, i0, gx, gy, alpha, v0, vx, vy, eps, full, w0, wx, wy, invd, r
                                                   lens, full and y == start, complete, w)
             if full:
                 _weights_row(y, i0, img, gx, gy, lens, q, alpha * alpha, eps, v0, vx, vy,
-                             w0, wx, wy, invd, r, complete, w)
+                             w0, wx, wy, invd, r, complete, w, rr[y])
                 lens[3] = lens[2]
-    return rows[:, 0].sum(), rows[:, 1].max()
+    return rows[:, 0].sum(), rows[:, 1].max(), rr.sum(axis=0)
 
 
 @njit(cache=True)
@@ -166,20 +168,25 @@ def _q_half(out, e, v, scale, ie, n):
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _residual_half(rs, i0s, ic, il, ir, iu, idn, gxs, gxl, gys, gyu, q0, qxs, qxl, qys, qyu, n):
     """r = W0 (I0 - x) - Dx^T Wx (Dx x - Gx) - Dy^T Wy (Dy x - Gy) on one half row (float64
-    arithmetic; the data rows are cache-resident, cheaper to reread than to store residuals)."""
+    arithmetic; the data rows are cache-resident, cheaper to reread than to store residuals);
+    returns its sum of squares."""
+    s = 0.0
     for i in range(n):
         c = ic[i]
-        rs[i] = (q0[i] * (i0s[i] - c) + qxs[i] * (ir[i] - c - gxs[i])
-                 - qxl[i] * (c - il[i] - gxl[i]) + qys[i] * (idn[i] - c - gys[i])
-                 - qyu[i] * (c - iu[i] - gyu[i]))
+        v = (q0[i] * (i0s[i] - c) + qxs[i] * (ir[i] - c - gxs[i])
+             - qxl[i] * (c - il[i] - gxl[i]) + qys[i] * (idn[i] - c - gys[i])
+             - qyu[i] * (c - iu[i] - gyu[i]))
+        rs[i] = v
+        s += v * v
+    return s
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
 def _weights_row(y, i0, img, gx, gy, lens, q, a2, eps, v0, vx, vy, w0, wx, wy, invd, r,
-                 complete, w):
-    """Row y of irls_pass's weights ``1 / (1 + |e| / eps)``, inverse diagonal and residual, from
-    the lengths (e0, ex, ey, eu in lens); q: a float32 4 x 2 x Wh buffer whose frame slot
-    q[1, 0, 0] (the edge left of the first pixel) is 0."""
+                 complete, w, rr):
+    """Row y of irls_pass's weights ``1 / (1 + |e| / eps)``, inverse diagonal and residual (its
+    sum of squares per channel into rr), from the lengths (e0, ex, ey, eu in lens); q: a float32
+    4 x 2 x Wh buffer whose frame slot q[1, 0, 0] (the edge left of the first pixel) is 0."""
     c, hp = img.shape[0], img.shape[1]
     cv = v0.shape[0]
     r0, rx, ry, ru = _validity_rows(y, hp, complete)
@@ -207,7 +214,7 @@ def _weights_row(y, i0, img, gx, gy, lens, q, a2, eps, v0, vx, vy, w0, wx, wy, i
         for k in range(kw if cv > 1 else 0, kw + 1 if cv > 1 else c):
             for h in range(2):
                 s = 1 - h
-                _residual_half(r[k, y, h, s:], i0[k, y, h, s:], img[k, y, h, s:], img[k, y, s],
+                rr[k] += _residual_half(r[k, y, h, s:], i0[k, y, h, s:], img[k, y, h, s:], img[k, y, s],
                                img[k, y, s, 1:], img[k, y - 1, h, s:], img[k, y + 1, h, s:],
                                gx[k, y, h, s:], gx[k, y, s], gy[k, y, h, s:], gy[k, y - 1, h, s:],
                                q[0, h, s:], q[1, h, s:], q[1, s], q[2, h, s:], q[3, h, s:],
@@ -249,7 +256,7 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
     op = split_operator(*wts, w)
     data = (i0, gx, gy, alpha, v0, vx, vy)
     nch = 4 * get_num_threads()
-    energy, emax = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
+    energy, emax, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
     history, inner = [energy], []
     for k in range(1, irls_iterations):
         # eps = 0 (pure IRLS) must not divide by an exactly-zero residual: floor it far below the
@@ -257,14 +264,15 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
         eps = max(eps0 * eps_decay ** (k - 1), 1e-12 * emax, 1e-300)
         # weights eps / (|e| + eps) lie in (0, 1]: any common scale gives the same correction
         # (A and r scale together), and this one needs no extra pass and cannot overflow float32
-        energy, emax = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete, w)
+        energy, emax, rr = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete, w)
         if k > 1:
             history.append(energy)
         pre = Multigrid(*wts, w, dtype=dtype, sweeps=sweeps, invd0=invd)
         # the float32 correction's steps go straight into the float64 iterate
-        _, _, it = pcg_planar(r, op, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True, x=x)
+        _, _, it = pcg_planar(r, op, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True, x=x,
+                              rr0=rr)
         inner.append(it)
     if irls_iterations > 1:
-        energy, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
+        energy, _, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
         history.append(energy)
     return from_split(x, w), history, inner

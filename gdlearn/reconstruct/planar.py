@@ -92,6 +92,18 @@ def _update(x, r, p, ap, a):
 
 
 @kernel(fastmath=True)
+def _axpy(x, p, a):
+    """x += a p (a per channel)."""
+    c, hp, wp = x.shape
+    for y in prange(hp):
+        for k in range(c):
+            ak = a[k]
+            xr, pr = x[k, y], p[k, y]
+            for i in range(wp):
+                xr[i] += ak * pr[i]
+
+
+@kernel(fastmath=True)
 def _direction(p, z, beta):
     """p = z + beta p (beta per channel)."""
     c, hp, wp = p.shape
@@ -104,8 +116,15 @@ def _direction(p, z, beta):
 
 
 def planar_operator(w0, wx, wy):
-    """The operator argument of :func:`pcg_planar` for natural-layout weights."""
-    return lambda p, out: apply_planar(p, w0, wx, wy, out)
+    """The operator argument of :func:`pcg_planar` for natural-layout weights (the extra inner
+    products by numpy: this layout serves tests and reference, not speed)."""
+    def op(p, out, r=None):
+        r = p if r is None else r
+        pap = apply_planar(p, w0, wx, wy, out)
+        dot = [np.einsum("kyx,kyx->k", a, b, dtype=np.float64) for a, b in ((r, p), (r, out),
+                                                                           (out, out))]
+        return np.stack([pap, *dot])
+    return op
 
 
 def _rows(a):
@@ -114,20 +133,28 @@ def _rows(a):
 
 
 def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False,
-               x=None):
+               x=None, rr0=None):
     """Preconditioned CG on ``A d = b`` from d = 0, one independent system per channel, in the
     dtype of ``b`` (float32 or float64), for the padded layouts (natural or :mod:`.split`).
-    ``operator(p, out)`` writes A p into out's interior and returns p^T A p per channel
-    (:func:`planar_operator`, :func:`.split.split_operator`). Stops when ||b - A d|| <= tol *
-    bnorm (bnorm defaults to ||b||) or after ``maxiter`` steps. Returns (d, history of
-    ||b - A d|| / bnorm, steps). ``overwrite_b``: use ``b`` as the residual's storage (saves a
-    copy). ``x``: add the steps to this array instead (e.g. the float64 iterate of an outer
-    iterative refinement: no separate ``x += d`` pass) and return it as d."""
+    ``operator(p, out, r)`` writes A p into out's interior and returns the 4 x C inner products
+    (p^T A p, r^T p, r^T A p, |A p|^2) per channel (:func:`planar_operator`,
+    :func:`.split.split_operator`). Stops when ||b - A d|| <= tol * bnorm (bnorm defaults to
+    ||b||) or after ``maxiter`` steps. Returns (d, history of ||b - A d|| / bnorm, steps).
+    ``overwrite_b``: use ``b`` as the residual's storage (saves a copy; b then holds no useful
+    value). ``x``: add the steps to this array instead (e.g. the float64 iterate of an outer
+    iterative refinement: no separate ``x += d`` pass) and return it as d. ``rr0``: b^T b per
+    channel if the caller has it (the IRLS pass computes it with b).
+
+    Fused passes: the first step's r^T z is the operator's r^T p (p = z); the new residual's norm
+    ``|r - a A p|^2 = r^T r - 2 a r^T A p + a^2 |A p|^2`` is known before r is updated, so the
+    last step updates d alone (r is not needed after it). That prediction is trusted only while
+    it keeps >= 1e-6 of r^T r (cancellation costs at most ~1e-9 of it then); deeper steps
+    update r and measure it."""
     d = np.zeros_like(b) if x is None else x
     r = b if overwrite_b else b.copy()
     ap = np.zeros_like(b)             # the operator writes the interior: the frame stays 0
     d3, r3, ap3 = _rows(d), _rows(r), _rows(ap)
-    rr = _dot(r3, r3)
+    rr = _dot(r3, r3) if rr0 is None else np.asarray(rr0, dtype=np.float64)
     if bnorm is None:
         bnorm = float(np.sqrt(rr.sum()))
     if bnorm == 0.0:
@@ -140,13 +167,21 @@ def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite
     # p may alias the preconditioner's output buffer until a second step needs z again: IRLS
     # mostly stops after one step, and the copy is a full pass over the vectors
     p = z if z is not r else z.copy()     # (an identity preconditioner returns r itself)
-    rz = _dot(r3, _rows(z))
+    rz = None
     while True:
-        pap = operator(p, ap)
+        pap, rp, rap, apap = operator(p, ap, r)
+        if rz is None:
+            rz = rp                        # first step: p = z
         # a channel whose residual is already exactly 0 has pAp = 0: leave it alone
         a = np.where(pap > 0.0, rz / np.where(pap > 0.0, pap, 1.0), 0.0)
-        rr = _update(d3, r3, _rows(p), ap3, a)
         it += 1
+        rr_new = rr - 2.0 * a * rap + a * a * apap
+        last = it >= maxiter or np.sqrt(max(rr_new.sum(), 0.0)) / bnorm <= tol
+        if last and rr_new.sum() >= 1e-6 * rr.sum():
+            _axpy(d3, _rows(p), a)
+            history.append(float(np.sqrt(rr_new.sum())) / bnorm)
+            break
+        rr = _update(d3, r3, _rows(p), ap3, a)
         history.append(float(np.sqrt(rr.sum())) / bnorm)
         if it >= maxiter or history[-1] <= tol:
             break

@@ -80,39 +80,48 @@ def from_split(s, w, dtype=np.float64):
 
 
 @njit(cache=True, fastmath=True)
-def _apply_half(ps, pl, pr, pu, pd, w0s, wxs, wxl, wys, wyu, outs, n):
-    """One half row of A p (Eq. 19's weighted operator); returns its part of p^T A p."""
-    s = 0.0
+def _apply_half(ps, pl, pr, pu, pd, w0s, wxs, wxl, wys, wyu, rs, outs, n):
+    """One half row of A p (Eq. 19's weighted operator); returns its parts of p^T A p, r^T p,
+    r^T A p and (A p)^T (A p) (what a CG step needs besides A p, see :func:`.planar.pcg_planar`)."""
+    pap = 0.0
+    rp = 0.0
+    rap = 0.0
+    apap = 0.0
     for i in range(n):
         pc = ps[i]
         v = (w0s[i] * pc + wxs[i] * (pc - pr[i]) + wxl[i] * (pc - pl[i])
              + wys[i] * (pc - pd[i]) + wyu[i] * (pc - pu[i]))
         outs[i] = v
-        s += pc * v
-    return s
+        pap += pc * v
+        rp += rs[i] * pc
+        rap += rs[i] * v
+        apap += v * v
+    return pap, rp, rap, apap
 
 
 @kernel(fastmath=True)
-def apply_split(p, w0, wx, wy, out, w):
+def apply_split(p, w0, wx, wy, out, w, r):
     """out = A p, ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy``, on the interior (split layout, interior
-    width w); returns p^T A p per channel."""
+    width w); returns the 4 x C inner products (p^T A p, r^T p, r^T A p, |A p|^2) per channel --
+    with them a CG step needs no separate pass for r^T z or for its stopping test."""
     c, hp = p.shape[0], p.shape[1]
     cw = w0.shape[0]
-    rows = np.zeros((hp, c))
+    rows = np.zeros((hp, 4, c))
     for y in prange(1, hp - 1):
         for k in range(c):
             kw = k if cw > 1 else 0
-            s = 0.0
             for h in range(2):
                 q = 1 - h
-                s += _apply_half(p[k, y, h, q:], p[k, y, q], p[k, y, q, 1:], p[k, y - 1, h, q:],
-                                 p[k, y + 1, h, q:], w0[kw, y, h, q:], wx[kw, y, h, q:],
-                                 wx[kw, y, q], wy[kw, y, h, q:], wy[kw, y - 1, h, q:],
-                                 out[k, y, h, q:], half_count(h, w))
-            rows[y, k] = s
+                sums = _apply_half(p[k, y, h, q:], p[k, y, q], p[k, y, q, 1:], p[k, y - 1, h, q:],
+                                   p[k, y + 1, h, q:], w0[kw, y, h, q:], wx[kw, y, h, q:],
+                                   wx[kw, y, q], wy[kw, y, h, q:], wy[kw, y - 1, h, q:],
+                                   r[k, y, h, q:], out[k, y, h, q:], half_count(h, w))
+                for j in range(4):
+                    rows[y, j, k] += sums[j]
     return rows.sum(axis=0)
 
 
 def split_operator(w0, wx, wy, w):
-    """The operator argument of :func:`.planar.pcg_planar` for split-layout weights."""
-    return lambda p, out: apply_split(p, w0, wx, wy, out, w)
+    """The operator argument of :func:`.planar.pcg_planar` for split-layout weights (``r``
+    omitted: p itself, i.e. just A p and p^T A p wanted)."""
+    return lambda p, out, r=None: apply_split(p, w0, wx, wy, out, w, p if r is None else r)
