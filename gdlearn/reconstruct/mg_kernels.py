@@ -48,21 +48,39 @@ def rb_sweep(z, b, wx, wy, invd, colour, om, w):
                       wy[kw, y, h, q:], wy[kw, y - 1, h, q:], invd[kw, y, h, q:], om, n)
 
 
+@njit(cache=True, fastmath=True)
+def _first_black_half(zs, zl, zr, bu, bd, idu, idd, bs, wxs, wxl, wys, wyu, ids, om, n):
+    """The black half row of :func:`rb_first_pair`: red neighbours left / right from z (this
+    row's red half, just written), above / below recomputed as om D^-1 b."""
+    for i in range(n):
+        t = (bs[i] + wxs[i] * zr[i] + wxl[i] * zl[i] + wys[i] * (om * bd[i] * idd[i])
+             + wyu[i] * (om * bu[i] * idu[i])) * ids[i]
+        zs[i] = om * t
+
+
 @kernel(fastmath=True)
-def rb_first(z, b, invd, om):
-    """The first red sweep from z = 0: z = om D^-1 b on colour 0, 0 on colour 1 (whole rows; the
-    frame gets om D^-1 b = 0, so z needs no zeroing first)."""
+def rb_first_pair(z, b, wx, wy, invd, om, w):
+    """The first red sweep from z = 0 and the black sweep after it, in one pass: red
+    z = om D^-1 b, black z = om D^-1 (b + the weighted red neighbours) (SOR from z = 0). The red
+    values of the rows above and below are recomputed (om D^-1 b) instead of read, so rows stay
+    independent (parallel) and z is written once instead of three times. The red half is written
+    whole (its frame slots get om D^-1 0 = 0), the black half on the interior only."""
     c, hp, _, wh = z.shape
     cw = invd.shape[0]
     for y in prange(1, hp - 1):
-        h = y % 2
+        hr = y % 2                    # red ((X + Y) even) pixels of row y; black in 1 - hr
+        hb = 1 - hr
         for k in range(c):
             kw = k if cw > 1 else 0
-            zr, zo, br, idr = z[k, y, h], z[k, y, 1 - h], b[k, y, h], invd[kw, y, h]
+            zr, br, idr = z[k, y, hr], b[k, y, hr], invd[kw, y, hr]
             for i in range(wh):
                 zr[i] = om * br[i] * idr[i]
-            for i in range(wh):
-                zo[i] = 0.0
+            q = hr                    # the black half's slices start at 1 - hb = hr
+            _first_black_half(z[k, y, hb, q:], z[k, y, q], z[k, y, q, 1:], b[k, y - 1, hb, q:],
+                              b[k, y + 1, hb, q:], invd[kw, y - 1, hb, q:],
+                              invd[kw, y + 1, hb, q:], b[k, y, hb, q:], wx[kw, y, hb, q:],
+                              wx[kw, y, q], wy[kw, y, hb, q:], wy[kw, y - 1, hb, q:],
+                              invd[kw, y, hb, q:], om, half_count(hb, w))
 
 
 @njit(cache=True, fastmath=True)
