@@ -112,6 +112,19 @@ def _squares_half(e0, ex, ey, ic, ir, idn, i0s, gxs, gys, v0s, vxs, vys, alpha, 
 
 
 @njit(cache=True, fastmath=True, error_model="numpy")
+def _squares_complete(e0, ex, ey, ic, ir, idn, i0s, gxs, gys, alpha, n):
+    """_squares_half for complete data (validity 1; the caller zeroes the masked terms)."""
+    for i in range(n):
+        c = ic[i]
+        d0 = alpha * (c - i0s[i])
+        ddx = ir[i] - c - gxs[i]
+        ddy = idn[i] - c - gys[i]
+        e0[i] += d0 * d0
+        ex[i] += ddx * ddx
+        ey[i] += ddy * ddy
+
+
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy, lens, with_eu, complete, w):
     """Row y of irls_pass: colour lengths of the residuals into lens (e0, ex, ey; with
     ``with_eu`` also eu, the edge above (y-1, x) - (y, x), else lens[3] must hold row y-1's ey
@@ -133,14 +146,25 @@ def _lengths_row(y, img, i0, gx, gy, alpha, v0, vx, vy, lens, with_eu, complete,
         for k in range(c):
             kv = k if cv > 1 else 0
             ic, gyu, vu = img[k, y, h, q:], gy[k, y - 1, h, q:], vy[kv, ru, h, q:]
-            _squares_half(e0, ex, ey, ic, img[k, y, q, 1:], img[k, y + 1, h, q:],
-                          i0[k, y, h, q:], gx[k, y, h, q:], gy[k, y, h, q:], v0[kv, r0, h, q:],
-                          vx[kv, rx, h, q:], vy[kv, ry, h, q:], alpha, n)
+            if complete:
+                _squares_complete(e0, ex, ey, ic, img[k, y, q, 1:], img[k, y + 1, h, q:],
+                                  i0[k, y, h, q:], gx[k, y, h, q:], gy[k, y, h, q:], alpha, n)
+            else:
+                _squares_half(e0, ex, ey, ic, img[k, y, q, 1:], img[k, y + 1, h, q:],
+                              i0[k, y, h, q:], gx[k, y, h, q:], gy[k, y, h, q:],
+                              v0[kv, r0, h, q:], vx[kv, rx, h, q:], vy[kv, ry, h, q:], alpha, n)
             if with_eu:
                 iu = img[k, y - 1, h, q:]
                 for i in range(n):
                     ddu = ic[i] - iu[i] - gyu[i]
                     eu[i] += vu[i] * ddu * ddu
+        if complete:
+            # validity is 1 but for the masked last column of gx and last row of gy: zeroed
+            # here instead of loaded per channel and value (a third fewer loads)
+            if h == w % 2:
+                ex[w // 2 - q] = 0.0
+            if y == hp - 2:
+                ey[:n] = 0.0
         for i in range(n):
             e0[i] = np.sqrt(e0[i])
         for i in range(n):
