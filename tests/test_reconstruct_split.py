@@ -188,3 +188,30 @@ def test_transfers_and_coarsening_equal_numpy(h, w, cw):
     for got, want in zip(cl, (c0, cx, cy)):
         assert np.abs(nat(got, wc)[:, 1:-1, 1:-1] - want).max() < 1e-13
         assert frame_is_zero(got, wc)
+
+
+@pytest.mark.parametrize("h, w", SIZES + [(40, 9), (41, 16), (2, 3)])
+@pytest.mark.parametrize("cw", [1, 3])
+@pytest.mark.parametrize("dtype, tol", [(np.float64, 1e-12), (np.float32, 1e-5)])
+@pytest.mark.parametrize("parallel", [False, True])
+def test_presmooth_restrict_equals_sweep_then_restrict(h, w, cw, dtype, tol, parallel):
+    """The fused pre-smoothing + restriction (one pass, halo rows recomputed per chunk, the
+    residual without a diagonal product) against rb_first_pair then residual_restrict, serial
+    and parallel twins (the parallel one's chunks of coarse rows start at every other fine row,
+    so halos are exercised). Tolerance: round-off of the two formulas (D z = om b holds up to
+    the rounding of 1 / D), relative to the largest residual."""
+    w0, wx, wy, _, b, invd = problem(h, w, cw, seed=8)
+    hc, wc = (h + 1) // 2, (w + 1) // 2
+    sb, sw0, swx, swy, sinvd = (spl(a, dtype) for a in (b, w0, wx, wy, invd))
+    om = dtype(1.2)
+    z_ref = np.zeros(sb.shape, dtype)
+    mk.rb_first_pair(z_ref, sb, swx, swy, sinvd, om, w)
+    rc_ref = np.zeros(split_shape(3, hc, wc), dtype)
+    mk.residual_restrict(z_ref, sb, sw0, swx, swy, rc_ref, w)
+    z = spl(to_planar(np.full((h, w, 3), 7.0)), dtype)     # stale interior, zero frame
+    rc = np.full(split_shape(3, hc, wc), np.nan, dtype)    # every slot must be written
+    fused = mk.presmooth_restrict.parallel if parallel else mk.presmooth_restrict.serial
+    fused(z, sb, swx, swy, sinvd, om, rc, w)
+    assert np.abs(z - z_ref).max() <= tol * max(1.0, np.abs(z_ref).max())
+    assert np.abs(rc - rc_ref).max() <= tol * max(1.0, np.abs(rc_ref).max())
+    assert frame_is_zero(z, w) and frame_is_zero(rc, wc)
