@@ -280,3 +280,21 @@ def test_fused_irls_pass_matches_separate_computation(complete, h, w):
             assert np.allclose(ninvd[..., kw].ravel(), want_invd, rtol=1e-6, atol=0)
     for arr in (*wts, invd, r):                # the frame and spare slots stay 0
         assert np.array_equal(to_split(from_split(arr, w), arr.dtype), arr)
+
+
+@pytest.mark.parametrize("h, w", [(19, 23), (4, 5)])     # a hierarchy, and one level only
+def test_multigrid_reusing_arrays_equals_a_fresh_one(h, w):
+    """Multigrid(reuse=previous) takes over the previous reweighting's arrays (no fresh pages);
+    built on new weights it must give exactly the V-cycle a fresh Multigrid gives (same
+    arithmetic on the same values), also when called several times (buffers already filled)."""
+    rng = np.random.default_rng(9)
+    first = split(planar_weights(h, w, 1, rng, 3.0))
+    second = split(planar_weights(h, w, 1, rng, 5.0))
+    r = to_split(rng.standard_normal((h, w, 3)))
+    old = Multigrid(*first, w, dtype=np.float64)
+    old(r)
+    reused = Multigrid(*second, w, dtype=np.float64, reuse=old)
+    fresh = Multigrid(*second, w, dtype=np.float64)
+    for _ in range(2):
+        assert np.array_equal(reused(r), fresh(r))
+    assert reused.levels[-1][0] is old.levels[-1][0] or len(fresh.levels) == 1

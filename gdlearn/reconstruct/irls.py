@@ -280,6 +280,7 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
     op = split_operator(*wts, w)
     data = (i0, gx, gy, alpha, v0, vx, vy)
     nch = 4 * get_num_threads()
+    pre, work = None, {}         # the V-cycle's and CG's arrays, reused by every reweighting
     energy, emax, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
     history, inner = [energy], []
     for k in range(1, irls_iterations):
@@ -291,10 +292,10 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
         energy, emax, rr = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete, w)
         if k > 1:
             history.append(energy)
-        pre = Multigrid(*wts, w, dtype=dtype, sweeps=sweeps, invd0=invd)
+        pre = Multigrid(*wts, w, dtype=dtype, sweeps=sweeps, invd0=invd, reuse=pre)
         # the float32 correction's steps go straight into the float64 iterate
         _, _, it = pcg_planar(r, op, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True, x=x,
-                              rr0=rr)
+                              rr0=rr, work=work)
         inner.append(it)
     if irls_iterations > 1:
         energy, _, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)

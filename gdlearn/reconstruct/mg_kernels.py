@@ -146,6 +146,8 @@ def presmooth_restrict(z, b, wx, wy, invd, om, rc, w):
         tmp = np.zeros(2 * whc, dtype=rc.dtype)            # tmp[0], tmp[wc + 1:] stay 0
         for k in range(c):
             kw = k if cw > 1 else 0
+            if ys > ye:                 # a chunk of frame coarse rows only: no halo
+                break
             if ys - 1 >= 1:
                 _presmooth_row(halo[k, 0], b, invd, wx, wy, k, kw, ys - 1, om, w)
             if ye + 1 <= hp - 2:

@@ -133,7 +133,7 @@ def _rows(a):
 
 
 def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite_b=False,
-               x=None, rr0=None):
+               x=None, rr0=None, work=None):
     """Preconditioned CG on ``A d = b`` from d = 0, one independent system per channel, in the
     dtype of ``b`` (float32 or float64), for the padded layouts (natural or :mod:`.split`).
     ``operator(p, out, r)`` writes A p into out's interior and returns the 4 x C inner products
@@ -143,7 +143,9 @@ def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite
     ``overwrite_b``: use ``b`` as the residual's storage (saves a copy; b then holds no useful
     value). ``x``: add the steps to this array instead (e.g. the float64 iterate of an outer
     iterative refinement: no separate ``x += d`` pass) and return it as d. ``rr0``: b^T b per
-    channel if the caller has it (the IRLS pass computes it with b).
+    channel if the caller has it (the IRLS pass computes it with b). ``work``: a dict in which
+    the vectors A p and p live across calls (same shape and dtype; their frames stay 0), so a
+    caller solving many systems does not pay for fresh pages each time.
 
     Fused passes: the first step's r^T z is the operator's r^T p (p = z); the new residual's norm
     ``|r - a A p|^2 = r^T r - 2 a r^T A p + a^2 |A p|^2`` is known before r is updated, so the
@@ -152,7 +154,11 @@ def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite
     update r and measure it."""
     d = np.zeros_like(b) if x is None else x
     r = b if overwrite_b else b.copy()
-    ap = np.zeros_like(b)             # the operator writes the interior: the frame stays 0
+    work = {} if work is None else work
+    if work.get("ap") is None or work["ap"].shape != b.shape or work["ap"].dtype != b.dtype:
+        work["ap"] = np.zeros_like(b)     # the operator writes the interior: the frame stays 0
+        work["p"] = None
+    ap = work["ap"]
     d3, r3, ap3 = _rows(d), _rows(r), _rows(ap)
     rr = _dot(r3, r3) if rr0 is None else np.asarray(rr0, dtype=np.float64)
     if bnorm is None:
@@ -186,7 +192,10 @@ def pcg_planar(b, operator, precond, tol=1e-2, maxiter=50, bnorm=None, overwrite
         if it >= maxiter or history[-1] <= tol:
             break
         if p is z:
-            p = z.copy()
+            if work.get("p") is None:
+                work["p"] = np.empty_like(z)
+            p = work["p"]
+            p[...] = z
         z = precond(r)
         rz_new = _dot(r3, _rows(z))
         beta = np.where(rz > 0.0, rz_new / np.where(rz > 0.0, rz, 1.0), 0.0)
