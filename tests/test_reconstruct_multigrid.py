@@ -298,3 +298,18 @@ def test_multigrid_reusing_arrays_equals_a_fresh_one(h, w):
     for _ in range(2):
         assert np.array_equal(reused(r), fresh(r))
     assert reused.levels[-1][0] is old.levels[-1][0] or len(fresh.levels) == 1
+
+
+@pytest.mark.parametrize("scale, eps0", [(1.0, 0.0), (1e13, 0.05)])
+def test_first_reweighting_floor_without_a_lengths_pass(scale, eps0):
+    """The first reweighting's eps is floored at 1e-12 x the start's largest residual, which the
+    first full IRLS pass itself measures: where the floor changes eps (pure IRLS, eps0 = 0, or
+    residuals > 1e10 eps0) the pass is redone with it. Without the redo the weights of eps =
+    1e-300 overflow (fastmath assumes no inf); with it the result is finite and no worse than
+    the L2 start, and the history starts at the L2 start's energy."""
+    i0, gx, gy, _ = outlier_problem(20, 24, 7)
+    res = poisson_l1(scale * i0, scale * gx, scale * gy, eps0=eps0)
+    start = poisson_l1(scale * i0, scale * gx, scale * gy, irls_iterations=1)
+    assert np.all(np.isfinite(res.image)) and np.all(np.isfinite(res.history))
+    assert res.history[0] == pytest.approx(start.history[0], rel=1e-12)
+    assert res.history[-1] < res.history[0]

@@ -281,23 +281,29 @@ def irls_multigrid(prob, x, alpha, irls_iterations, eps0, eps_decay, cg_iteratio
     data = (i0, gx, gy, alpha, v0, vx, vy)
     nch = 4 * get_num_threads()
     pre, work = None, {}         # the V-cycle's and CG's arrays, reused by every reweighting
-    energy, emax, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
-    history, inner = [energy], []
+    history, inner, emax = [], [], 0.0
     for k in range(1, irls_iterations):
         # eps = 0 (pure IRLS) must not divide by an exactly-zero residual: floor it far below the
         # largest residual (of the iterate before x: the pass that reads x needs eps already)
         eps = max(eps0 * eps_decay ** (k - 1), 1e-12 * emax, 1e-300)
         # weights eps / (|e| + eps) lie in (0, 1]: any common scale gives the same correction
         # (A and r scale together), and this one needs no extra pass and cannot overflow float32
-        energy, emax, rr = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete, w)
-        if k > 1:
-            history.append(energy)
+        energy, emax_x, rr = irls_pass(x, *data, eps, True, *wts, invd, r, nch, prob.complete,
+                                       w)
+        if k == 1 and 1e-12 * emax_x > eps:
+            # the first floor needs the start's own largest residual, which a lengths-only pass
+            # used to measure first: that pass is skipped and this one redone in the rare case
+            # (residuals > 1e10 eps0) where the floor changes eps -- the same result either way
+            eps = 1e-12 * emax_x
+            energy, emax_x, rr = irls_pass(x, *data, eps, True, *wts, invd, r, nch,
+                                           prob.complete, w)
+        history.append(energy)                 # the L1 energy of x before this reweighting
+        emax = emax_x
         pre = Multigrid(*wts, w, dtype=dtype, sweeps=sweeps, invd0=invd, reuse=pre)
         # the float32 correction's steps go straight into the float64 iterate
         _, _, it = pcg_planar(r, op, pre, tol=tol, maxiter=cg_iterations, overwrite_b=True, x=x,
                               rr0=rr, work=work)
         inner.append(it)
-    if irls_iterations > 1:
-        energy, _, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
-        history.append(energy)
+    energy, _, _ = irls_pass(x, *data, 1.0, False, *wts, invd, r, nch, prob.complete, w)
+    history.append(energy)
     return from_split(x, w), history, inner
