@@ -6,6 +6,7 @@ one row), with shared (1) and per-channel (3) weights."""
 import numpy as np
 import pytest
 
+from gdlearn.reconstruct import mg_fused as mf
 from gdlearn.reconstruct import mg_kernels as mk
 from gdlearn.reconstruct.planar import apply_planar, from_planar, to_planar
 from gdlearn.reconstruct.split import apply_split, from_split, split_shape, to_split
@@ -119,7 +120,7 @@ def test_rb_sweeps_equal_the_natural_smoother(h, w, cw, dtype, tol):
     zn = ref_sweep(zn, b, wx, wy, invd, 1, om)
     sb, swx, swy, sinvd = (spl(a, dtype) for a in (b, wx, wy, invd))
     zs = spl(to_planar(np.full((h, w, 3), 7.0)), dtype)    # stale interior values, zero frame
-    mk.rb_first_pair(zs, sb, swx, swy, sinvd, dtype(om), w)    # must not need a zeroed z
+    mf.rb_first_pair(zs, sb, swx, swy, sinvd, dtype(om), w)    # must not need a zeroed z
     scale = max(1.0, np.abs(zn).max())
     assert np.abs(nat(zs, w) - zn).max() <= tol * scale
     for colour in (1, 0, 1, 0):
@@ -205,13 +206,35 @@ def test_presmooth_restrict_equals_sweep_then_restrict(h, w, cw, dtype, tol, par
     sb, sw0, swx, swy, sinvd = (spl(a, dtype) for a in (b, w0, wx, wy, invd))
     om = dtype(1.2)
     z_ref = np.zeros(sb.shape, dtype)
-    mk.rb_first_pair(z_ref, sb, swx, swy, sinvd, om, w)
+    mf.rb_first_pair(z_ref, sb, swx, swy, sinvd, om, w)
     rc_ref = np.zeros(split_shape(3, hc, wc), dtype)
     mk.residual_restrict(z_ref, sb, sw0, swx, swy, rc_ref, w)
     z = spl(to_planar(np.full((h, w, 3), 7.0)), dtype)     # stale interior, zero frame
     rc = np.full(split_shape(3, hc, wc), np.nan, dtype)    # every slot must be written
-    fused = mk.presmooth_restrict.parallel if parallel else mk.presmooth_restrict.serial
+    fused = mf.presmooth_restrict.parallel if parallel else mf.presmooth_restrict.serial
     fused(z, sb, swx, swy, sinvd, om, rc, w)
     assert np.abs(z - z_ref).max() <= tol * max(1.0, np.abs(z_ref).max())
     assert np.abs(rc - rc_ref).max() <= tol * max(1.0, np.abs(rc_ref).max())
     assert frame_is_zero(z, w) and frame_is_zero(rc, wc)
+
+
+@pytest.mark.parametrize("h, w", [(40, 9), (41, 16), (7, 9)])
+@pytest.mark.parametrize("nch", [3, 5])
+def test_presmooth_restrict_chunks_need_no_other_chunk(h, w, nch):
+    """Each chunk of presmooth_restrict must read only what no other chunk writes (its halo rows
+    recomputed): run the chunks one by one in reverse order, on a z whose rows are NaN until a
+    chunk writes them, and every chunk must still give the reference rows (in forward order a
+    chunk that read its upper neighbour's rows of z would get them right by luck; in reverse
+    order the NaN of the unwritten rows shows). Float64: round-off only."""
+    _, wx, wy, _, b, invd = problem(h, w, 1, seed=11)
+    hc, wc = (h + 1) // 2, (w + 1) // 2
+    sb, swx, swy, sinvd = (spl(a) for a in (b, wx, wy, invd))
+    z_ref = np.zeros(sb.shape)
+    rc_ref = np.zeros(split_shape(3, hc, wc))
+    mf.presmooth_restrict.serial(z_ref, sb, swx, swy, sinvd, 1.2, rc_ref, w)
+    z = spl(to_planar(np.full((h, w, 3), np.nan)))             # NaN interior, zero frame
+    rc = np.full(split_shape(3, hc, wc), np.nan)
+    for j in reversed(range(nch)):
+        mf._presmooth_restrict_chunk(j, nch, z, sb, swx, swy, sinvd, 1.2, rc, w)
+    assert np.abs(z - z_ref).max() <= 1e-12 * np.abs(z_ref).max()
+    assert np.abs(rc - rc_ref).max() <= 1e-12 * np.abs(rc_ref).max()

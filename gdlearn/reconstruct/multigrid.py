@@ -8,7 +8,7 @@ Operator (as in :mod:`.operators`): ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy``.
 Layout: see :mod:`.split` (padded vectors C x (H+2) x 2 x Wh, each row its even then its odd
 columns, weights Cw x ... with a zero frame): every stencil runs without boundary tests, and a
 red-black half-sweep touches only its colour's contiguous half rows. The stencils live in
-:mod:`.mg_kernels`.
+:mod:`.mg_kernels`, passes fusing several of them in :mod:`.mg_fused`.
 
 **Coarsening** by aggregation: each 2 x 2 block is one coarse cell; prolongation P copies a coarse
 value to its block, restriction is P^T (block sum). The coarse operator keeps the 5-point form:
@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import mg_fused as mf
 from . import mg_kernels as mk
 from .split import from_split, split_shape, to_split
 
@@ -187,9 +188,9 @@ class Multigrid:
         wx, wy = ws[1], ws[2]
         sweeps = self.sweeps(level)
         if sweeps == 1:     # red from z = 0, black, residual and restriction in one pass
-            mk.presmooth_restrict(z, b, wx, wy, invd, self.om, rc, w)
+            mf.presmooth_restrict(z, b, wx, wy, invd, self.om, rc, w)
         else:
-            mk.rb_first_pair(z, b, wx, wy, invd, self.om, w)
+            mf.rb_first_pair(z, b, wx, wy, invd, self.om, w)
             for _ in range(sweeps - 1):
                 mk.rb_sweep(z, b, wx, wy, invd, 0, self.om, w)
                 mk.rb_sweep(z, b, wx, wy, invd, 1, self.om, w)
