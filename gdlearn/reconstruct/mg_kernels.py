@@ -3,6 +3,11 @@ smoothers (red-black SOR, damped Jacobi), residual + restriction, prolongation, 
 the inverse diagonal of ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy`` (Eq. 18-19, weighted form). Passes
 that fuse several of them: :mod:`.mg_fused`.
 
+**Loops in the kernel body.** A half row's loop is written where its slices are made, not in a
+helper called with them: such a call costs ~0.1 us in a serial twin (each slice's reference
+count is updated around it) -- more than the work of a coarse level's short row (a sweep at
+64 x 64 x 3 took 25 us with helpers, 5 us without; at 1280 x 720 the same).
+
 Every kernel takes the level's interior width ``w`` and writes interior values only (the frame of
 vectors and weights stays 0, see :mod:`.split`). Transfers between a level and the next coarser one
 go through a natural-order coarse row buffer: coarse column Xc covers fine columns 2 Xc - 1 (odd
@@ -17,17 +22,17 @@ from numba import njit, prange
 from ._jit import kernel
 from .split import half_count
 
-#: Row-parallel kernels that need a row buffer split the rows into this many chunks and make one
-#: buffer per chunk (made per row, the allocations cost ~10 % of a sweep at 1280 x 720).
+#: Row-parallel kernels that need a row buffer split the rows into at most this many chunks and
+#: make one buffer per chunk (made per row, the allocations cost ~10 % of a sweep at 1280 x 720).
 CHUNKS = 16
 
 
-@njit(cache=True, fastmath=True)
-def _sor_half(zs, zl, zr, zu, zd, bs, wxs, wxl, wys, wyu, ids, om, n):
-    """SOR on one half row: z += om (D^-1 (b + sum of the weighted neighbours) - z)."""
-    for i in range(n):
-        t = (bs[i] + wxs[i] * zr[i] + wxl[i] * zl[i] + wys[i] * zd[i] + wyu[i] * zu[i]) * ids[i]
-        zs[i] += om * (t - zs[i])
+@njit(cache=True)
+def n_chunks(rows, per_chunk):
+    """Chunks of a row-parallel kernel over ``rows`` rows: at most CHUNKS, each of at least
+    ``per_chunk`` rows -- a chunk pays for its buffers and, in the fused passes, for its halo
+    rows (16 chunks of a 32-row coarse level doubled the work of presmooth_restrict)."""
+    return max(1, min(CHUNKS, rows // per_chunk))
 
 
 @kernel(fastmath=True)
@@ -36,36 +41,29 @@ def rb_sweep(z, b, wx, wy, invd, colour, om, w):
     (X + Y) % 2 == colour -- half ``(colour + Y) % 2`` of row Y. Their four neighbours have the
     other colour, so rows are independent (parallel) and the order does not matter. ``om`` has
     the vectors' dtype (a float64 scalar would widen a float32 loop to float64)."""
-    c, hp = z.shape[0], z.shape[1]
+    c, hp, _, wh = z.shape
     cw = wx.shape[0]
-    for y in prange(1, hp - 1):
-        h = (colour + y) % 2
-        q = 1 - h
-        n = half_count(h, w)
-        for k in range(c):
-            kw = k if cw > 1 else 0
-            _sor_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:], z[k, y - 1, h, q:],
-                      z[k, y + 1, h, q:], b[k, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q],
-                      wy[kw, y, h, q:], wy[kw, y - 1, h, q:], invd[kw, y, h, q:], om, n)
-
-
-@njit(cache=True, fastmath=True)
-def _residual_half(zs, zl, zr, zu, zd, bs, w0s, wxs, wxl, wys, wyu, out, n):
-    """out = b - A z on one half row."""
-    for i in range(n):
-        pc = zs[i]
-        out[i] = bs[i] - (w0s[i] * pc + wxs[i] * (pc - zr[i]) + wxl[i] * (pc - zl[i])
-                          + wys[i] * (pc - zd[i]) + wyu[i] * (pc - zu[i]))
-
-
-@njit(cache=True, fastmath=True)
-def _jacobi_half(zs, zl, zr, zu, zd, bs, w0s, wxs, wxl, wys, wyu, ids, omega, out, n):
-    """out = z + omega D^-1 (b - A z) on one half row."""
-    for i in range(n):
-        pc = zs[i]
-        v = (w0s[i] * pc + wxs[i] * (pc - zr[i]) + wxl[i] * (pc - zl[i])
-             + wys[i] * (pc - zd[i]) + wyu[i] * (pc - zu[i]))
-        out[i] = pc + omega * ids[i] * (bs[i] - v)
+    n = hp - 2
+    nch = n_chunks(n, 8)
+    for j in prange(nch):
+        t = np.empty(wh, dtype=z.dtype)
+        for y in range(1 + j * n // nch, 1 + (j + 1) * n // nch):
+            h = (colour + y) % 2
+            q = 1 - h
+            m = half_count(h, w)
+            for k in range(c):
+                kw = k if cw > 1 else 0
+                zs, zl, zr, zu, zd = (z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:],
+                                      z[k, y - 1, h, q:], z[k, y + 1, h, q:])
+                bs, ids, wxs = b[k, y, h, q:], invd[kw, y, h, q:], wx[kw, y, h, q:]
+                wxl, wys, wyu = wx[kw, y, q], wy[kw, y, h, q:], wy[kw, y - 1, h, q:]
+                # the Gauss-Seidel values into a private buffer first: a loop that stores into z
+                # while it reads z's other half and rows stays scalar
+                for i in range(m):
+                    t[i] = (bs[i] + wxs[i] * zr[i] + wxl[i] * zl[i] + wys[i] * zd[i]
+                            + wyu[i] * zu[i]) * ids[i]
+                for i in range(m):
+                    zs[i] += om * (t[i] - zs[i])
 
 
 @kernel(fastmath=True)
@@ -78,11 +76,16 @@ def jacobi(z, b, w0, wx, wy, invd, omega, out, w):
             kw = k if cw > 1 else 0
             for h in range(2):
                 q = 1 - h
-                _jacobi_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:], z[k, y - 1, h, q:],
-                             z[k, y + 1, h, q:], b[k, y, h, q:], w0[kw, y, h, q:],
-                             wx[kw, y, h, q:], wx[kw, y, q], wy[kw, y, h, q:],
-                             wy[kw, y - 1, h, q:], invd[kw, y, h, q:], omega,
-                             out[k, y, h, q:], half_count(h, w))
+                zs, zl, zr, zu, zd = (z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:],
+                                      z[k, y - 1, h, q:], z[k, y + 1, h, q:])
+                bs, w0s, wxs, wxl = b[k, y, h, q:], w0[kw, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q]
+                wys, wyu, ids, os = (wy[kw, y, h, q:], wy[kw, y - 1, h, q:], invd[kw, y, h, q:],
+                                     out[k, y, h, q:])
+                for i in range(half_count(h, w)):
+                    pc = zs[i]
+                    v = (w0s[i] * pc + wxs[i] * (pc - zr[i]) + wxl[i] * (pc - zl[i])
+                         + wys[i] * (pc - zd[i]) + wyu[i] * (pc - zu[i]))
+                    os[i] = pc + omega * ids[i] * (bs[i] - v)
 
 
 @kernel(fastmath=True)
@@ -114,7 +117,7 @@ def residual_restrict(z, b, w0, wx, wy, rc, w):
     cw = w0.shape[0]
     hcp, whc = rc.shape[1], rc.shape[3]
     wc = (w + 1) // 2
-    nch = min(CHUNKS, hcp)
+    nch = n_chunks(hcp, 4)
     for j in prange(nch):
         res = np.zeros((2, wh), dtype=rc.dtype)      # slots never written stay 0 (frame)
         tmp = np.zeros(2 * whc, dtype=rc.dtype)
@@ -128,11 +131,16 @@ def residual_restrict(z, b, w0, wx, wy, rc, w):
                 for y in range(2 * yc - 1, min(2 * yc + 1, hp - 1)):
                     for h in range(2):
                         q = 1 - h
-                        _residual_half(z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:],
-                                       z[k, y - 1, h, q:], z[k, y + 1, h, q:], b[k, y, h, q:],
-                                       w0[kw, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q],
-                                       wy[kw, y, h, q:], wy[kw, y - 1, h, q:], res[h, q:],
-                                       half_count(h, w))
+                        zs, zl, zr = z[k, y, h, q:], z[k, y, q], z[k, y, q, 1:]
+                        zu, zd, bs = z[k, y - 1, h, q:], z[k, y + 1, h, q:], b[k, y, h, q:]
+                        rs = res[h, q:]
+                        w0s, wxs, wxl = w0[kw, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q]
+                        wys, wyu = wy[kw, y, h, q:], wy[kw, y - 1, h, q:]
+                        for i in range(half_count(h, w)):
+                            pc = zs[i]
+                            rs[i] = bs[i] - (w0s[i] * pc + wxs[i] * (pc - zr[i])
+                                             + wxl[i] * (pc - zl[i]) + wys[i] * (pc - zd[i])
+                                             + wyu[i] * (pc - zu[i]))
                     r1, r0 = res[1], res[0, 1:]
                     for i in range(wc):
                         tmp[1 + i] += r1[i] + r0[i]
@@ -146,7 +154,7 @@ def prolong_add(z, ec, w):
     c, hp = z.shape[0], z.shape[1]
     whc = ec.shape[3]
     n = hp - 2
-    nch = min(CHUNKS, n)
+    nch = n_chunks(n, 8)
     for j in prange(nch):
         t = np.empty(2 * whc, dtype=ec.dtype)
         for y in range(1 + j * n // nch, 1 + (j + 1) * n // nch):
@@ -167,7 +175,7 @@ def coarsen(w0, wx, wy, factor, c0, cx, cy, w):
     it crosses (see :mod:`.multigrid`). Fine values past the interior are the zero frame."""
     cw, hcp, _, whc = c0.shape
     wc = (w + 1) // 2
-    nch = min(CHUNKS, hcp)
+    nch = n_chunks(hcp, 4)
     for j in prange(nch):
         t = np.zeros(2 * whc, dtype=c0.dtype)        # t[0] and t[wc + 1:] stay 0 (frame)
         for yc in range(j * hcp // nch, (j + 1) * hcp // nch):

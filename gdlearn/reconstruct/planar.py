@@ -1,4 +1,6 @@
-"""The weighted screened Poisson operator and conjugate gradients on a padded planar layout.
+"""The weighted screened Poisson operator on a padded planar layout, and conjugate gradients for
+the padded layouts (this one and the red-black split layout of :mod:`.split`, which the L1 path
+uses; the CG vector kernels are layout-blind).
 
 Operator (as in :mod:`.operators`, Eq. 18-19 of Hua et al. 2019 in weighted form):
 ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy``.

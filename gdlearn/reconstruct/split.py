@@ -79,45 +79,41 @@ def from_split(s, w, dtype=np.float64):
     return out
 
 
-@njit(cache=True, fastmath=True)
-def _apply_half(ps, pl, pr, pu, pd, w0s, wxs, wxl, wys, wyu, rs, outs, n):
-    """One half row of A p (Eq. 19's weighted operator); returns its parts of p^T A p, r^T p,
-    r^T A p and (A p)^T (A p) (what a CG step needs besides A p, see :func:`.planar.pcg_planar`)."""
-    pap = 0.0
-    rp = 0.0
-    rap = 0.0
-    apap = 0.0
-    for i in range(n):
-        pc = ps[i]
-        v = (w0s[i] * pc + wxs[i] * (pc - pr[i]) + wxl[i] * (pc - pl[i])
-             + wys[i] * (pc - pd[i]) + wyu[i] * (pc - pu[i]))
-        outs[i] = v
-        pap += pc * v
-        rp += rs[i] * pc
-        rap += rs[i] * v
-        apap += v * v
-    return pap, rp, rap, apap
-
-
 @kernel(fastmath=True)
 def apply_split(p, w0, wx, wy, out, w, r):
     """out = A p, ``A = W0 + Dx^T Wx Dx + Dy^T Wy Dy``, on the interior (split layout, interior
     width w); returns the 4 x C inner products (p^T A p, r^T p, r^T A p, |A p|^2) per channel --
-    with them a CG step needs no separate pass for r^T z or for its stopping test."""
+    with them a CG step needs no separate pass for r^T z or for its stopping test. (The loop is
+    in the kernel body, see :mod:`.mg_kernels`.)"""
     c, hp = p.shape[0], p.shape[1]
     cw = w0.shape[0]
     rows = np.zeros((hp, 4, c))
     for y in prange(1, hp - 1):
         for k in range(c):
             kw = k if cw > 1 else 0
+            pap = 0.0
+            rp = 0.0
+            rap = 0.0
+            apap = 0.0
             for h in range(2):
                 q = 1 - h
-                sums = _apply_half(p[k, y, h, q:], p[k, y, q], p[k, y, q, 1:], p[k, y - 1, h, q:],
-                                   p[k, y + 1, h, q:], w0[kw, y, h, q:], wx[kw, y, h, q:],
-                                   wx[kw, y, q], wy[kw, y, h, q:], wy[kw, y - 1, h, q:],
-                                   r[k, y, h, q:], out[k, y, h, q:], half_count(h, w))
-                for j in range(4):
-                    rows[y, j, k] += sums[j]
+                ps, pl, pr, pu = p[k, y, h, q:], p[k, y, q], p[k, y, q, 1:], p[k, y - 1, h, q:]
+                pd, rs, outs = p[k, y + 1, h, q:], r[k, y, h, q:], out[k, y, h, q:]
+                w0s, wxs, wxl = w0[kw, y, h, q:], wx[kw, y, h, q:], wx[kw, y, q]
+                wys, wyu = wy[kw, y, h, q:], wy[kw, y - 1, h, q:]
+                for i in range(half_count(h, w)):
+                    pc = ps[i]
+                    v = (w0s[i] * pc + wxs[i] * (pc - pr[i]) + wxl[i] * (pc - pl[i])
+                         + wys[i] * (pc - pd[i]) + wyu[i] * (pc - pu[i]))
+                    outs[i] = v
+                    pap += pc * v
+                    rp += rs[i] * pc
+                    rap += rs[i] * v
+                    apap += v * v
+            rows[y, 0, k] = pap
+            rows[y, 1, k] = rp
+            rows[y, 2, k] = rap
+            rows[y, 3, k] = apap
     return rows.sum(axis=0)
 
 
