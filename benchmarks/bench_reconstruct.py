@@ -5,8 +5,9 @@
                                                      [--baseline DIR]
 
 ``--baseline DIR``: DIR holds an older ``gdlearn/reconstruct`` (e.g. ``git archive <commit>
-gdlearn/reconstruct | tar -x -C DIR``); its L1 defaults are timed interleaved with the current
-ones (before / after in the same run, same load) and its energy joins the quality table.
+gdlearn/reconstruct | tar -x -C DIR``); its exact L2, L1 defaults and 50 uniform control-variate
+iterations are timed interleaved with the current ones (before / after in the same run, same
+load; best wall and best CPU time of each) and its L1 energy joins the quality table.
 
 Every solver runs once on a small image and once at full size first (numba JIT and caches warm),
 then ``--repeats`` times; the table shows the best wall time (the machine's 2 cores are shared, so
@@ -151,6 +152,27 @@ def interleaved(fs, repeats):
     return {n: (min(wall[n]), min(cpu[n])) for n in fs}
 
 
+def interleaved_table(base, p, gx, gy, repeats):
+    """The target rows, baseline and current package in turn (same load for both)."""
+    pairs = {"exact L2 (DCT)": (base.poisson_l2, poisson_l2, ()),
+             "L1 IRLS, defaults": (base.poisson_l1, poisson_l1, ()),
+             "control variates, uniform, 50 it.": (base.control_variates, control_variates, (50,))}
+    fs = {}
+    for name, (old, new, extra) in pairs.items():
+        old(p, gx, gy, *extra)                      # the baseline's JIT / caches warm
+        fs[(name, "baseline")] = lambda f=old, e=extra: f(p, gx, gy, *e)
+        fs[(name, "current")] = lambda f=new, e=extra: f(p, gx, gy, *e)
+    load0 = os.getloadavg()[0]
+    res = interleaved(fs, repeats)
+    print(f"\ninterleaved with the baseline, best of {repeats} (load average {load0:.1f} -> "
+          f"{os.getloadavg()[0]:.1f}):")
+    print(f"  {'':36s} {'baseline wall / cpu':>22s} {'current wall / cpu':>22s} {'speed-up':>9s}")
+    for name in pairs:
+        (tb, cb), (tc, cc) = res[(name, "baseline")], res[(name, "current")]
+        print(f"  {name:36s} {tb:8.3f} s / {cb:6.3f} s  {tc:8.3f} s / {cc:6.3f} s  "
+              f"{tb / tc:5.2f}x wall, {cb / cc:.2f}x cpu", flush=True)
+
+
 def row(name, t, target=None, extra=""):
     """Wall time (the target's measure), CPU time of this process (all threads; on a shared
     machine it shows the work done, not the time waited for a core)."""
@@ -215,14 +237,7 @@ def main():
         row(name, t, targets.get(name), extra)
 
     if base is not None:
-        fs = {"baseline": lambda: base.poisson_l1(p, gx, gy),
-              "current": lambda: poisson_l1(p, gx, gy)}
-        fs["baseline"]()
-        res = interleaved(fs, max(args.repeats, 3))
-        print(f"L1 defaults, interleaved (load {os.getloadavg()[0]:.1f}): "
-              + ", ".join(f"{n} wall {t:.3f} s cpu {c:.3f} s" for n, (t, c) in res.items())
-              + f"; speed-up {res['baseline'][0] / res['current'][0]:.2f}x (wall), "
-              f"{res['baseline'][1] / res['current'][1]:.2f}x (cpu)", flush=True)
+        interleaved_table(base, p, gx, gy, max(args.repeats, 3))
 
     if not args.no_scipy:
         t_dct = results["exact L2 (DCT)"][0]

@@ -35,19 +35,31 @@ API: every solver returns a :class:`Reconstruction`
   preconditioner="multigrid", mg_sweeps=1)`` -- IRLS (the reference solver's L1D preset); each
   reweighting makes its weights, diagonal and float64 residual in one pass over the data, then
   solves a float32 correction by CG with a multigrid V-cycle (symmetric SOR smoothing,
-  :mod:`.multigrid`, on the padded planar layout of :mod:`.planar`, driver in :mod:`.irls`)
-  until its residual halves -- one or two steps; ``preconditioner="dct"`` keeps the
-  DCT-preconditioned path; history: L1 energy per reweighting.
+  :mod:`.multigrid`) until its residual halves -- one or two steps -- whose steps go straight into
+  the float64 iterate. All of it runs on the red-black split layout of :mod:`.split` (each row
+  its even, then its odd columns: a half-sweep computes only the colour it moves); driver in
+  :mod:`.irls`. ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1 energy
+  per reweighting.
 
-Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 threads, best of 3-4): exact L2
-0.14-0.16 s; 50 uniform CV iterations 0.36-0.39 s; weighted L2 4.8 s quiet (35 DCT-preconditioned
-CG steps); L1 defaults 1.9 s quiet before the fused IRLS pass and SOR smoothing, 1.56 s after
-(load ~2; interleaved with the older code in the same run: 1.92 s -> 1.69 s, 1.14x), 26
+Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 threads, best of 5, 2026-12-01, the
+machine shared: load average 1.5-2.5, so the two threads had about one core between them and
+wall ~ CPU time): exact L2 0.073-0.076 s; 50 uniform CV iterations 0.50-0.59 s; weighted L2
+2.8 s (35 DCT-preconditioned CG steps); plain scipy CG on the L2 normal equations 11.4 s (330
+iterations). L1 defaults 0.72-0.75 s (1.9 s quiet before the fused IRLS pass, 1.56 s after it);
+interleaved with main (3d79ea0) in the same run 1.11 s -> 0.72 s (1.54x, CPU alike), 26
 multigrid-preconditioned CG steps, at 0.99977 of the energy of a 20 x 50 plain-CG emulation of
-the reference preset (0.99983 before). Still above the 1 s target: per reweighting one SOR
-V-cycle (each half-sweep computes the whole row, twice the needed arithmetic) and the IRLS pass
-(~30 ms) remain; the stencils are compute-bound here (a cache-resident image is barely faster per
-value), so fusing passes saves little and halving arithmetic (a red-black split layout) is next.
+the reference preset and RMS error 0.0304 on the 320 x 180 quality problem (both as before).
+What made the difference: the split layout (the finest sweep 2.5 -> 1.25 ms on one core), the
+pre-sweep, residual and restriction fused into one pass on large levels, CG's inner products
+fused into the operator and the IRLS pass (the last step updates only x), numba's division
+checks off where divisions are guarded (error_model="numpy": they kept the weight loops scalar),
+no x += d pass, arrays reused across reweightings, loops in kernel bodies (helpers called with
+many array slices cost ~0.1 us a call in serial code -- small images had become slower than
+main's; now 320 x 180 takes 37 ms against 56 ms, 64 x 64 9.3 ms against 8.7 ms). Left, per
+reweighting on one core: the IRLS pass ~11 ms (memory-bound: 96 bytes of float64 data a pixel;
+float32 data would break exact recovery) and ~13 ms of V-cycle and CG product per CG step, plus
+the exact L2 start (~65 ms); fusing the post-smoothing with the CG product measured slower (those
+passes are compute-bound), so did folding the prolongation into the sweeps.
 """
 from .control_variates import CVHistory, control_variates, cv_history
 from .conventions import Reconstruction, forward_differences, variances_from_halves

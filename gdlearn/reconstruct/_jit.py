@@ -18,21 +18,24 @@ from numba import njit
 PARALLEL_MIN_SIZE = 1 << 18
 
 
-def kernel(fn=None, *, fastmath=False):
+def kernel(fn=None, *, fastmath=False, error_model="python"):
     """Decorator: ``fn(*arrays)`` dispatches on the size of its first argument.
 
     ``@kernel(fastmath=True)`` lets LLVM reassociate float sums, so loops with a reduction
     (inner products) vectorise; only for kernels whose inputs are finite by construction and whose
-    results may differ from a sequential sum by round-off.
+    results may differ from a sequential sum by round-off. ``error_model="numpy"``: a float
+    division by zero gives inf / nan instead of raising ZeroDivisionError -- numba's default
+    test before every division keeps a loop with a division scalar; only for kernels whose
+    divisions are guarded (``1 / d if d > 0``, ``1 + e / eps`` with eps > 0).
     """
     if fn is None:
-        return functools.partial(kernel, fastmath=fastmath)
-    par = njit(cache=True, parallel=True, fastmath=fastmath)(fn)
+        return functools.partial(kernel, fastmath=fastmath, error_model=error_model)
+    par = njit(cache=True, parallel=True, fastmath=fastmath, error_model=error_model)(fn)
     twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial",
                               fn.__defaults__, fn.__closure__)
     twin.__qualname__ = fn.__qualname__ + "_serial"
     twin.__module__ = fn.__module__
-    ser = njit(cache=True, fastmath=fastmath)(twin)
+    ser = njit(cache=True, fastmath=fastmath, error_model=error_model)(twin)
 
     @functools.wraps(fn)
     def call(*args):
