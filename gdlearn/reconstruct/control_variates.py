@@ -19,15 +19,19 @@ Consequence worth knowing: with equal, non-zero primal and gradient variances th
 uniform -- the self term is trusted more; they are uniform when the gradient variances vanish.
 
 Variances from two half-buffers (``halves=``) are pooled over each pixel's 3 x 3 window
-(``variance_pool=1``, :func:`gdlearn.reconstruct.conventions.pool_variance`). The per-pixel estimate
-(A - B)^2 / 4 has one degree of freedom: in a pixel whose two halves happen to agree it is near zero,
-Eq. 21 then trusts that pixel's identities almost alone, and the early snapshots of a progressive
-render can end up worse than the primal image. Nine pixels' estimates are far steadier, and
-blur the variance only across one pixel. Measured (gpt-replay, 48^2, 4 seeds, relMSE against a
-2048-spp pt reference, 2026-12-01), per-pixel -> pooled r = 1 -> r = 2: Cornell box 8 spp
-8.8e-2 -> 2.1e-2 -> 4.5e-2, 32 spp 2.0e-2 -> 6.7e-3 -> 1.2e-2; fog box 4 spp 0.36 -> 0.091 -> 0.14,
-32 spp 1.5e-2 -> 1.4e-2 -> 2.0e-2; caustics box 16 spp 0.21 -> 0.099 -> 0.17 (uniform CV 0.45, the
-primal 0.35). Explicit ``variances=`` are used as given.
+(``variance_pool=1``, :func:`gdlearn.reconstruct.conventions.variances_from_halves`): each estimate
+becomes the larger of itself and its window's mean. The per-pixel estimate (A - B)^2 / 4 has one
+degree of freedom: in a pixel whose two halves happen to agree it is near zero, Eq. 21 then trusts
+that pixel's identities almost alone, and the early snapshots of a progressive render can end up
+worse than the primal image. The window's mean is far steadier; taking the maximum with the
+pixel's own estimate keeps an isolated noisy pixel (a firefly, a pixel on the light's edge) from
+being averaged into trust -- with the plain mean, 64-spp Cornell boxes came out worse than with
+no pooling. Measured (gpt-replay, 48^2, 4 seeds, relMSE against a 2048-spp pt reference,
+2026-12-01), per-pixel -> plain mean -> max(own, mean): Cornell box 4 spp 0.124 -> 0.048 -> 0.039,
+64 spp 1.8e-2 -> 4.2e-3 -> 4.2e-3 (primal 1.2e-2); fog box 4 spp 0.36 -> 0.096 -> 0.083, 64 spp
+7.6e-3 -> 9.1e-3 -> 8.4e-3 (primal 5.0e-2); caustics box 16 spp 0.118 -> 0.103 -> 0.093, 64 spp
+3.3e-2 -> 3.5e-2 -> 3.0e-2 (primal 0.10). A 5 x 5 window (r = 2, plain mean) was worse than 3 x 3
+everywhere measured. Explicit ``variances=`` are used as given.
 
 Boundaries and missing data: a pixel averages only the identities that exist -- neighbours inside
 the image whose gradient is finite, itself if its primal is finite (the reference implementation
@@ -344,9 +348,10 @@ def control_variates(primal, gx, gy, iterations: int = 50, *, variances: dict | 
 
     ``variances = {"primal": v0, "gx": vx, "gy": vy}`` (per-pixel variances of the three means,
     H x W or H x W x C) or ``halves = {"primal": (A, B), "gx": (A, B), "gy": (A, B)}`` (two
-    independent half-buffers, variances estimated by :func:`variances_from_halves` and averaged
-    over (2 * variance_pool + 1)^2 pixels, module docstring) select the weighted form. ``history[n-1]`` is the RMS change of iteration n, ``||I^(n) - I^(n-1)||``
-    over all pixels and channels (the fixed-point residual of Eq. 11).
+    independent half-buffers, variances estimated by :func:`variances_from_halves` and pooled
+    over (2 * variance_pool + 1)^2 pixels, module docstring) select the weighted form.
+    ``history[n-1]`` is the RMS change of iteration n, ``||I^(n) - I^(n-1)||`` over all pixels
+    and channels (the fixed-point residual of Eq. 11).
     """
     t0 = time.perf_counter()
     gen = _iterate(primal, gx, gy, iterations, variances, halves, iterate_variance_divisor, variance_pool)

@@ -195,9 +195,12 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     estimate as ``gdlearn.integrators.base.Frame.variance`` and the two-buffer approach the STAR
     describes for photon mapping (Hua et al. 2019, Sec. 5.2).
 
-    ``pool = r > 0`` averages those estimates over the (2r + 1)^2 window around each pixel
-    (:func:`pool_variance`): about (2r + 1)^2 degrees of freedom instead of one, at the price of
-    blurring the variance across edges. The weighted control variates use r = 1 (see there).
+    ``pool = r > 0`` replaces each estimate by the larger of itself and its mean over the
+    (2r + 1)^2 window around the pixel (:func:`pool_variance`). The mean has about (2r + 1)^2
+    degrees of freedom instead of one, so a pixel whose two halves happen to agree is no longer
+    trusted blindly; keeping the pixel's own estimate where it is larger stops the mean from
+    diluting an isolated high-variance pixel (a firefly, the edge of a light) into trust. The
+    weighted control variates use r = 1 (measurements there).
     """
     if int(pool) != pool or pool < 0:
         raise ValueError(f"pool = {pool!r} must be an integer >= 0 (0: per pixel, 1: 3 x 3 window)")
@@ -208,7 +211,7 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
             raise ValueError(f"halves[{name!r}]: the two halves have shapes {a.shape} and "
                              f"{b.shape}; they must match")
         v = 0.25 * (a - b) ** 2
-        out[name] = pool_variance(v, int(pool)) if pool else v
+        out[name] = np.fmax(v, pool_variance(v, int(pool))) if pool else v   # fmax: NaN stays out
     return out
 
 
