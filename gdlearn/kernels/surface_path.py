@@ -8,7 +8,7 @@ Russian roulette from ``rr_depth`` on with Mitsuba's survival probability
 ignores them too); :mod:`gdlearn.kernels.volume_path` is the ``volpath`` counterpart.
 
 Random numbers (the layout random-sequence replay depends on, book chapter "replay"):
-``rand(seed, key, sample, dim)`` with the pixel's key and
+``rand_at(h, dim)`` with the pixel's key and
 
 * dims 0, 1: the film position inside the pixel (drawn by the caller),
 * bounce b uses dims ``2 + b * DIMS_PER_BOUNCE + k`` with k =
@@ -29,7 +29,7 @@ from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
 from .pathclass import pc_class, pc_init, pc_push, pc_reachable
-from .rng import rand
+from .rng import path_state, rand_at
 from .sampling import power_heuristic
 from .scene_query import occluded
 from .vec import coordinate_system, max3, to_local, to_world
@@ -46,7 +46,7 @@ def dim(bounce, k):
 
 
 @njit(cache=True, error_model="numpy")
-def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, want_coat=True, want_rest=True):
+def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, want_rest=True):
     """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput).
 
     ``want_coat`` / ``want_rest``: which of the vertex's :func:`bsdf.nee_classes` the effects mask
@@ -54,8 +54,8 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, 
     s, t, n = ns_frame
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
-        rand(seed, key, sample, dim(bounce, D_EM_SEL)), rand(seed, key, sample, dim(bounce, D_EM_U1)),
-        rand(seed, key, sample, dim(bounce, D_EM_U2)))
+        rand_at(h, dim(bounce, D_EM_SEL)), rand_at(h, dim(bounce, D_EM_U1)),
+        rand_at(h, dim(bounce, D_EM_U2)))
     if em < 0:
         return (0.0, 0.0, 0.0)
     wo = to_local(dl, s, t, n)
@@ -85,6 +85,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
     A null BSDF passes the ray on; as in Mitsuba's ``path`` it still counts towards max_depth, but
     it is not a vertex of the path's class.
     """
+    h = path_state(seed, key, sample)      # hashed once: each number is then one finaliser
     L0 = 0.0
     L1 = 0.0
     L2 = 0.0
@@ -125,13 +126,13 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         want_coat = _wanted(mask, pc_push(state, c_coat))
         want_rest = _wanted(mask, pc_push(state, c_rest))
         if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
-            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack, want_coat, want_rest)
+            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, h, depth, stack, want_coat, want_rest)
             L0 += beta[0] * c[0]
             L1 += beta[1] * c[1]
             L2 += beta[2] * c[2]
-        u_lobe = rand(seed, key, sample, dim(depth, D_LOBE))
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand(seed, key, sample, dim(depth, D_BSDF_U1)),
-                                               rand(seed, key, sample, dim(depth, D_BSDF_U2)))
+        u_lobe = rand_at(h, dim(depth, D_LOBE))
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, dim(depth, D_BSDF_U1)),
+                                               rand_at(h, dim(depth, D_BSDF_U2)))
         if not pdf > 0.0:
             break
         beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
@@ -149,7 +150,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         bmax = max3(beta)
         if depth >= rr_depth:
             q = min(bmax * eta * eta, 0.95)
-            if rand(seed, key, sample, dim(depth - 1, D_RR)) >= q:
+            if rand_at(h, dim(depth - 1, D_RR)) >= q:
                 break
             beta = (beta[0] / q, beta[1] / q, beta[2] / q)
         if not bmax > 0.0:
