@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from gdlearn.kernels import geometry as g
-from gdlearn.kernels.bvh import STACK_SIZE, any_hit, build, closest_hit
+from gdlearn.kernels.bvh import STACK_SIZE, any_hit, build, closest_hit, pack
 from gdlearn.scene.compile import _bounds
 from gdlearn.kernels.layout import MAT_WIDTH
 
@@ -37,15 +37,20 @@ def test_closest_and_any_hit_match_brute_force():
     rng = np.random.default_rng(4)
     rows, types = _soup(300, rng)
     areas, lo, hi = _bounds(rows, types)
-    nodes, node_info, order = build(lo, hi)
+    boxes, tree, order = build(lo, hi, types)
     rows, types = np.ascontiguousarray(rows[order]), types[order]
+    nodes, node_info = pack(boxes, tree, rows)
     info = np.zeros((len(rows), g.INFO_WIDTH), np.int32)
     info[:, g.INFO_TYPE] = types
     mats = np.zeros((1, MAT_WIDTH))
     stack = np.empty(STACK_SIZE, np.int32)
     # every primitive lies in exactly one leaf
     leaves = node_info[node_info[:, 1] > 0]
-    assert sorted(i for f, c, _ in leaves for i in range(f, f + c)) == list(range(len(rows)))
+    assert sorted(i for f, c, _, _ in leaves for i in range(f, f + c)) == list(range(len(rows)))
+    # a leaf's triangles come first and are counted (they are tested as one vectorised block)
+    for f, c, ntri, _ in leaves:
+        assert np.all(types[f:f + ntri] == g.P_TRIANGLE) and np.all(types[f + ntri:f + c] != g.P_TRIANGLE)
+    assert leaves[:, 2].max() > 1          # some blocks test several triangles at once
     hits = 0
     for _ in range(3000):
         o = tuple(rng.uniform(-7, 7, 3))
