@@ -252,6 +252,13 @@ def _leaf_triangles(nodes, base, ntri, o, d, tmin, tmax):
 @njit(cache=True, error_model="numpy")
 def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """(t, prim, u, v) of the nearest hit in (tmin, tmax); prim = -1 on a miss."""
+    return closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)
+
+
+@njit(cache=True, error_model="numpy", forceinline=True)
+def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+    """:func:`closest_hit` inlined into the caller by LLVM (the path tracers' hot loop: a call
+    passes four arrays as ~30 scalars, which costs more than a small scene's whole traversal)."""
     inv = _inv_dir(d)
     best_t = tmax
     best_p = -1
@@ -310,6 +317,12 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
 def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """Index of some primitive hit in (tmin, tmax), or -1. With ``skip_null``, primitives whose
     material is a null BSDF (``materials[m, 0] == NULL``) are ignored (they only bound media)."""
+    return any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials)
+
+
+@njit(cache=True, error_model="numpy", forceinline=True)
+def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
+    """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`)."""
     inv = _inv_dir(d)
     if _box_hit(nodes, 0, o, inv, tmin, tmax) == math.inf:
         return -1

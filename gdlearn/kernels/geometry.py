@@ -154,7 +154,9 @@ def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
     return t, u, v
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
+# its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def surface(prims, prim_info, prim, o, d, t, u, v):
     """The surface interaction of a hit: (p, ng, ns).
 

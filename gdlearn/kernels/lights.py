@@ -46,7 +46,9 @@ EM_WIDTH = 28
 INV_FOUR_PI = 0.25 / math.pi
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
+# its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def prim_point(prims, prim_info, prim, u1, u2):
     """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
     ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
@@ -120,7 +122,8 @@ def spot_falloff(emitters, em, d_world):
     return (emitters[em, EM_CUTOFF] - math.acos(min(1.0, c))) * emitters[em, EM_INV_TRANS]
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
     """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
 
@@ -186,7 +189,8 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
     return em, q, zero, d, r2, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, 0.0, False
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def emitter_pdf(emitters, em, p, q, nq):
     """Solid-angle pdf at ``p`` with which :func:`sample_emitter` would produce the emitter point
     ``q`` (normal ``nq``) of emitter ``em`` (area or constant; delta emitters: 0). For constant
@@ -207,7 +211,8 @@ def emitter_pdf(emitters, em, p, q, nq):
     return dist2 / (cos_q * emitters[em, EM_AREA] * n_em)
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def eval_emitter(emitters, em, nq, d):
     """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
     shading normal ``nq`` (zero from behind); constant emitters ignore nq."""

@@ -17,6 +17,12 @@ Random numbers (the layout random-sequence replay depends on, book chapter "repl
 
 The radiance function receives the key *separately* from the film position, so an offset path can
 replay the base path's numbers at a neighbouring pixel.
+
+Speed (benchmarks/README.md, "pt speed"): the kernels here are compiled without reference counting
+(numba's ``_nrt=False``): they only read the scene's arrays, which their caller keeps alive, and
+never allocate, while every array view (a material row) would otherwise cost two calls to numba's
+non-inlinable atomic reference-count functions per bounce. ``forceinline`` lets LLVM inline the
+next-event estimator into the bounce loop (a call passes the scene's arrays as ~100 scalars).
 """
 import math
 
@@ -24,7 +30,7 @@ from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
-from .bvh import closest_hit
+from .bvh import closest_hit_inline
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
@@ -45,7 +51,7 @@ def dim(bounce, k):
     return 2 + bounce * DIMS_PER_BOUNCE + k
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, want_rest=True):
     """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput).
 
@@ -75,7 +81,7 @@ def _wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb.
 
@@ -97,7 +103,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
     state = pc_init()
     depth = 0
     while True:
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if prim < 0:
             if sa.env >= 0 and _wanted(mask, state):       # escaped: the constant emitter

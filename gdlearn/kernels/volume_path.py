@@ -22,6 +22,9 @@ Rules taken from volpath (they change the image, so they follow Mitsuba exactly)
 
 Random numbers: the layout of :mod:`gdlearn.kernels.surface_path`, indexed by the *segment* number
 (every loop iteration, null crossings included, takes a fresh block of ``DIMS_PER_BOUNCE``).
+
+Compiled without reference counting and with the next-event estimator inlined, for the reasons given
+in :mod:`gdlearn.kernels.surface_path`.
 """
 import math
 
@@ -29,7 +32,7 @@ from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
-from .bvh import closest_hit
+from .bvh import closest_hit, closest_hit_inline
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
 from .layout import MAT_TYPE, NULL, V_MEDIUM
@@ -74,7 +77,7 @@ def next_medium(prim_info, prim, medium, d, ng):
     return prim_info[prim, INFO_MED_EXT]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def shadow_transmittance(sa, p, ng, q, medium, stack):
     """Transmittance from p (surface normal ng, or zeros in a medium) to q, crossing null interfaces
     and the media between them; 0 if any non-null surface blocks the segment."""
@@ -107,7 +110,7 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
     return tr
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
 def nee_volume(sa, p, ng, prim, medium, h, seg, stack):
     """Emitter sample from p with transmittance: (em, d, weight, pdf, is_delta) with weight =
     Le T / pdf (Mitsuba volpath's ``sample_emitter``); em = -1 when it carries nothing.
@@ -127,7 +130,7 @@ def nee_volume(sa, p, ng, prim, medium, h, seg, stack):
     return em, dl, (w_em[0] * tr[0], w_em[1] * tr[1], w_em[2] * tr[2]), pdf_em, delta
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``volpath``; see the module docstring)."""
     h = path_state(seed, key, sample)      # hashed once: each number is then one finaliser
@@ -141,7 +144,7 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
     state = pc_init()
     depth = 0
     for seg in range(MAX_SEGMENTS):
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if medium >= 0:
             sig, alb, g = medium_params(sa.media[medium])
