@@ -22,8 +22,8 @@ from numba import njit, prange
 from ..kernels.bvh import STACK_SIZE
 from ..kernels.camera import camera_ray
 from ..kernels.rng import rand
-from ..kernels.surface_path import radiance_path
-from ..kernels.volume_path import radiance_volpath
+from ..kernels.surface_path import radiance_path_inline
+from ..kernels.volume_path import radiance_volpath_inline
 from ..scene.effects import plan as effects_plan
 from ..scene.compile import borrowed, compile_scene
 from .base import PassResult, ProgressiveIntegrator
@@ -57,7 +57,7 @@ def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out
             a2 = 0.0
             for s in range(sample0, sample0 + spp):
                 o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                c = radiance_path_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
                 if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
                     a0 += c[0]
                     a1 += c[1]
@@ -91,7 +91,7 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
             a2 = 0.0
             for s in range(sample0, sample0 + spp):
                 o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_volpath(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                c = radiance_volpath_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
                 if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
                     a0 += c[0]
                     a1 += c[1]

@@ -132,6 +132,14 @@ def nee_volume(sa, p, ng, prim, medium, h, seg, stack):
 
 @njit(cache=True, error_model="numpy", _nrt=False)
 def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """Radiance along the camera ray (o, d) (Mitsuba ``volpath``): :func:`radiance_volpath_inline`
+    as a function of its own (see ``surface_path.radiance_path``)."""
+    return radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack)
+
+
+# forceinline: inlined into the path tracer's pixel loop (see surface_path.radiance_path_inline)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``volpath``; see the module docstring)."""
     h = path_state(seed, key, sample)      # hashed once: each number is then one finaliser
     L = (0.0, 0.0, 0.0)
