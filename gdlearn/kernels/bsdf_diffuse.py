@@ -14,7 +14,7 @@ from gdlearn.kernels.sampling import square_to_cosine_hemisphere
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_sample(mat, wi, u1, u2):
     """(wo, weight, pdf, is_delta) with wo ~ cos(theta) / pi and weight = R."""
     if wi[2] <= 0.0:
@@ -26,7 +26,7 @@ def diffuse_sample(mat, wi, u1, u2):
     return wo, (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2]), pdf, False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_eval(mat, wi, wo):
     """f(wi, wo) |cos wo| = R cos(wo) / pi."""
     if wi[2] <= 0.0 or wo[2] <= 0.0:
@@ -35,7 +35,7 @@ def diffuse_eval(mat, wi, wo):
     return (mat[MAT_R] * s, mat[MAT_R + 1] * s, mat[MAT_R + 2] * s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_pdf(mat, wi, wo):
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return 0.0

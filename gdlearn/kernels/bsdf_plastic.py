@@ -142,7 +142,7 @@ def roughplastic_eval(mat, wi, wo):
             mat[MAT_SR + 2] * spec + a[2] * s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _roughplastic_pdf_parts(mat, wi, wo):
     """(coating, base) parts of roughplastic_pdf, lobe-selection probabilities included."""
     cos_i, cos_o = wi[2], wo[2]

@@ -169,18 +169,18 @@ def _f64_bits(typingctx, x):
     return types.int64(types.float64), codegen
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _fmin(a, b):
     # written out: the builtin min/max are calls numba does not always inline
     return b if b < a else a
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _fmax(a, b):
     return b if b > a else a
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _box_hit(nodes, k, o, inv, tmin, tmax):
     """Slab test of node k; returns the entry distance or inf."""
     b = 6 * k
@@ -198,7 +198,7 @@ def _box_hit(nodes, k, o, inv, tmin, tmax):
     return math.inf
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _inv_dir(d):
     # 1/0 = +-inf is what the slab test wants; numba raises on float division by zero, so spell it out
     ix = 1.0 / d[0] if d[0] != 0.0 else math.copysign(math.inf, d[0])
@@ -207,7 +207,7 @@ def _inv_dir(d):
     return (ix, iy, iz)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _leaf_triangles(nodes, base, ntri, o, d, tmin, tmax):
     """Rank (0 .. ntri-1) of the nearest triangle of a leaf's block hit in (tmin, tmax), or -1.
 

@@ -91,7 +91,7 @@ def prim_point(prims, prim_info, prim, u1, u2):
     return q, (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _pick_prim(em_cdf, first, count, u):
     """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
     lo = first

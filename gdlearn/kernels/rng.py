@@ -47,7 +47,7 @@ _ONE = np.uint64(1)
 _INV53 = 1.0 / 9007199254740992.0   # 2^-53
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def mix64(z):
     """SplitMix64 finaliser: a bijective avalanche on 64-bit integers."""
     z = np.uint64(z)
@@ -56,7 +56,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def path_state(seed, key, sample):
     """The 64-bit state of the path (seed, key, sample): the seed of its SplitMix64 stream."""
     h = mix64(np.uint64(seed) * _GOLDEN + _ONE)
@@ -64,25 +64,25 @@ def path_state(seed, key, sample):
     return mix64(h ^ (np.uint64(sample) * _GOLDEN + _C_SAMPLE))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def hash_at(h, dim):
     """The 64-bit hash of dimension ``dim`` of the path with state ``h`` (SplitMix64 output dim+1)."""
     return mix64(h + (np.uint64(dim) + _ONE) * _GOLDEN)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def hash4(seed, key, sample, dim):
     """A 64-bit hash of four non-negative integers."""
     return hash_at(path_state(seed, key, sample), dim)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def rand_at(h, dim):
     """A uniform float64 in [0, 1) for dimension ``dim`` of the path with state ``h``; 53 bits."""
     return float(hash_at(h, dim) >> _S11) * _INV53
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def rand(seed, key, sample, dim):
     """A uniform float64 in [0, 1) for the coordinates (seed, key, sample, dim); 53 random bits.
     Equal, bit for bit, to ``rand_at(path_state(seed, key, sample), dim)``."""

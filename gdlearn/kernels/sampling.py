@@ -17,7 +17,7 @@ INV_TWO_PI = 0.5 / math.pi
 INV_FOUR_PI = 0.25 / math.pi
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def square_to_uniform_disk_concentric(u1, u2):
     """Shirley-Chiu concentric map of the unit square to the unit disk (area-preserving, low
     distortion); Mitsuba's ``warp::square_to_uniform_disk_concentric``. Returns (x, y)."""
@@ -40,7 +40,7 @@ def uniform_disk_pdf():
     return INV_PI
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def square_to_cosine_hemisphere(u1, u2):
     """Cosine-weighted hemisphere (Malley's method: a concentric disk sample lifted onto the
     hemisphere); pdf = cos(theta) / pi. Mitsuba's ``warp::square_to_cosine_hemisphere``."""
@@ -49,7 +49,7 @@ def square_to_cosine_hemisphere(u1, u2):
     return (x, y, z)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def cosine_hemisphere_pdf(w):
     """pdf of :func:`square_to_cosine_hemisphere` (0 below the horizon)."""
     return INV_PI * w[2] if w[2] > 0.0 else 0.0
@@ -116,7 +116,7 @@ def square_to_uniform_triangle(u1, u2):
     return 1.0 - t, t * u2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def balance_heuristic(pdf_a, pdf_b):
     """Veach's balance heuristic w_a = p_a / (p_a + p_b) (Eq. 9.10) as 1 / (1 + p_b / p_a).
 
@@ -131,7 +131,7 @@ def balance_heuristic(pdf_a, pdf_b):
     return 1.0 / (1.0 + r)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def power_heuristic(pdf_a, pdf_b):
     """Veach's power heuristic with beta = 2, w_a = p_a^2 / (p_a^2 + p_b^2) (Eq. 9.12), computed as
     1 / (1 + (p_b / p_a)^2) so squares of extreme pdfs never overflow. Mitsuba 3's path integrator

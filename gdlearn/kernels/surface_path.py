@@ -45,7 +45,7 @@ D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_C
 
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def dim(bounce, k):
     """The RNG dimension of quantity k at bounce b (see the module docstring)."""
     return 2 + bounce * DIMS_PER_BOUNCE + k
@@ -75,7 +75,7 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, 
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _wanted(mask, state):
     """Does the effects mask ask for the class of a path ending at a light after ``state``?"""
     return (mask >> pc_class(state)) & 1 == 1

@@ -52,7 +52,7 @@ from .vec import coordinate_system, dot, max3, to_local, to_world
 MAX_SEGMENTS = 4096
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def roulette(beta, eta, depth, rr_depth, u):
     """Mitsuba's Russian roulette from rr_depth on: survive with q = min(max(beta) eta^2, 0.95) and
     divide by q. Returns (alive, beta)."""
