@@ -259,7 +259,8 @@ def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
 def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """:func:`closest_hit` inlined into the caller by LLVM (the path tracers' hot loop: a call
     passes four arrays as ~30 scalars, which costs more than a small scene's whole traversal)."""
-    inv = _inv_dir(d)
+    # the slab tests' reciprocal direction: not needed when the whole tree is one leaf
+    inv = _inv_dir(d) if node_info[0, 1] == 0 else (0.0, 0.0, 0.0)
     best_t = tmax
     best_p = -1
     best_u = 0.0
@@ -323,9 +324,11 @@ def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_nu
 @njit(cache=True, error_model="numpy", forceinline=True)
 def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`)."""
-    inv = _inv_dir(d)
-    if _box_hit(nodes, 0, o, inv, tmin, tmax) == math.inf:
-        return -1
+    inv = (0.0, 0.0, 0.0)
+    if node_info[0, 1] == 0:          # a tree, not one leaf: cull by the root's box first
+        inv = _inv_dir(d)
+        if _box_hit(nodes, 0, o, inv, tmin, tmax) == math.inf:
+            return -1
     sp = 0
     node = 0
     while True:

@@ -153,13 +153,15 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
         if dist2 == 0.0:
             return -1, q, nq, zero, 0.0, zero, 0.0, 0.0, False
         dist = math.sqrt(dist2)
-        d = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
+        inv_dist = 1.0 / dist          # reciprocals: a division costs several multiplications
+        d = (dv[0] * inv_dist, dv[1] * inv_dist, dv[2] * inv_dist)
         cos_q = -dot(d, nq)
         if cos_q <= 0.0:        # one-sided: the back of an area emitter is black
             return -1, q, nq, d, dist, zero, 0.0, 0.0, False
         pdf_area = sel / emitters[em, EM_AREA]
         pdf = pdf_area * dist2 / cos_q
-        return em, q, nq, d, dist, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, pdf_area, False
+        inv_pdf = cos_q / (pdf_area * dist2)
+        return em, q, nq, d, dist, (rgb[0] * inv_pdf, rgb[1] * inv_pdf, rgb[2] * inv_pdf), pdf, pdf_area, False
     if et == E_POINT or et == E_SPOT:
         q = (emitters[em, EM_P], emitters[em, EM_P + 1], emitters[em, EM_P + 2])
         dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])

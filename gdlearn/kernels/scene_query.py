@@ -67,7 +67,8 @@ def shadow_ray(p, ng, q):
     dist = math.sqrt(dot(d, d))
     if dist == 0.0:
         return o, (0.0, 0.0, 1.0), 0.0
-    return o, (d[0] / dist, d[1] / dist, d[2] / dist), dist * (1.0 - SHADOW_EPS)
+    inv = 1.0 / dist
+    return o, (d[0] * inv, d[1] * inv, d[2] * inv), dist * (1.0 - SHADOW_EPS)
 
 
 # forceinline: as above
