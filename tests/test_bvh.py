@@ -95,6 +95,7 @@ def test_quads_hit_the_triangle_that_contains_the_point():
     assert leaves[:, 4].sum() * 2 == leaves[:, 2].sum()      # every triangle is half of a quad lane
     rows, types = sa.prims, sa.prim_info[:, g.INFO_TYPE]
     stack = np.empty(STACK_SIZE, np.int32)
+    short = np.empty(64, np.int32)
     rng = np.random.default_rng(7)
     hits = 0
     for _ in range(4000):
@@ -109,6 +110,8 @@ def test_quads_hit_the_triangle_that_contains_the_point():
         q = rows[p, 0:3] + u * rows[p, 3:6] + v * rows[p, 6:9]
         assert np.allclose(q, np.array(o) + t * np.array(d), atol=1e-12)
         assert min(u, v) >= -1e-12 and u + v <= 1 + 1e-12
+        # a short stack (no room for the lane scratch) gives the same answer by recomputing the lane
+        assert closest_hit(sa.nodes, sa.node_info, rows, sa.prim_info, o, d, 0.0, math.inf, short) == (t, p, u, v)
         hits += p == bp
     assert hits > 3000
 

@@ -15,20 +15,28 @@ lanes with AVX-512) instead of one by one with a branch per test: on the Cornell
 
 Traversal (numba): front-to-back with an explicit stack. The stack is an int32 array of
 ``STACK_SIZE`` the caller allocates once per thread/row and reuses (a per-ray allocation would cost
-as much as the traversal itself).
+as much as the traversal itself). Past its first ``DEPTH`` entries it doubles as float64 scratch
+where the vectorised leaf test leaves every lane's t, a, b: the nearest lane's values are then a
+load away instead of a dependent recomputation (~30 ns per closest hit on the Cornell box).
 """
 import math
 
 import numpy as np
 from llvmlite import ir as llvm_ir
 from numba import njit, types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 from .bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, build, build_scene  # noqa: F401
 from .geometry import INFO_MAT, INFO_TYPE, intersect_prim
+from .simd import block8
 from .layout import MAT_TYPE, NULL
 
-STACK_SIZE = 64
+#: traversal stack entries (a depth-first stack of a binary tree of <= 2^64 leaves needs fewer)
+DEPTH = 64
+#: the leaf test's scratch: t, a, b of up to LEAF_MAX lanes as float64 (two int32 entries each)
+_SCRATCH = 64
+STACK_SIZE = DEPTH + 2 * 3 * _SCRATCH
 
 # nearest-hit keys of _leaf_lanes: distance bits above, the lane below
 _KEY_LOW = np.int64(0xFF)
@@ -38,6 +46,31 @@ _U2, _U3, _U4, _U5, _U6, _U7, _U8, _U9 = (np.uint64(r) for r in range(2, 10))
 
 
 # --------------------------------------------------------------------------------------- traversal
+@intrinsic
+def _scratch(typingctx, stack):
+    """The float64 array over ``stack[DEPTH:]`` (the same memory, no reference count): the int32
+    stack's tail reinterpreted, valid while the stack lives (the caller's row or thread)."""
+    if not (isinstance(stack, types.Array) and stack.dtype == types.int32 and stack.ndim == 1):
+        return None
+    f64 = types.Array(types.float64, 1, "C")
+
+    def codegen(context, builder, signature, args):
+        src = context.make_array(stack)(context, builder, value=args[0])
+        dst = context.make_array(f64)(context, builder)
+        i64 = llvm_ir.IntType(64)
+        size = builder.extract_value(src.shape, 0)
+        n = builder.select(builder.icmp_signed(">", size, i64(DEPTH)),
+                           builder.sdiv(builder.sub(size, i64(DEPTH)), i64(2)), i64(0))
+        data = builder.gep(src.data, [i64(DEPTH)])
+        context.populate_array(dst, data=builder.bitcast(data, dst.data.type),
+                               shape=cgutils.pack_array(builder, [n]),
+                               strides=cgutils.pack_array(builder, [i64(8)]), itemsize=i64(8),
+                               meminfo=None)
+        return dst._getvalue()
+
+    return f64(stack), codegen
+
+
 @intrinsic
 def _f64_bits(typingctx, x):
     """The IEEE-754 bits of a float64 as an int64 (a bitcast: no instruction at all)."""
@@ -109,27 +142,23 @@ def _lane_tuv(nodes, i, s, o, d):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax):
+def _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, keep):
     """The lane (0 .. lanes-1) of a leaf's block with the nearest hit in (tmin, tmax), or -1.
 
-    One branch-free pass over the lanes that the compiler vectorises; a lane is hit when a, b >= 0,
-    a, b <= 1 and a + b <= lim (1: triangle, 2: parallelogram). The nearest hit is an integer
-    minimum of the distance's IEEE bits (monotone for t > 0) with the lane in the low 8 bits; two hits
-    closer than 2^-44 relative may be resolved by lane order, both are on the ray to within rounding.
+    A lane is hit when a, b >= 0, a, b <= 1 and a + b <= lim (1: triangle, 2: parallelogram),
+    tested 8 lanes at a time (:func:`gdlearn.kernels.simd.block8`, :func:`_lane_tuv`'s arithmetic).
+    The nearest hit is an integer minimum of the distance's IEEE bits (monotone for t > 0) with the
+    lane in the low 8 bits; two hits closer than 2^-44 relative may be resolved by lane order, both
+    are on the ray to within rounding. With ``keep`` every lane's t, a, b go to ``scratch``
+    [0, 64, 128 + lane].
     """
-    n8 = ((lanes + LANES - 1) >> 3) << 3      # known multiple of 8: no scalar remainder loop
-    # unsigned indices: a signed one gets numba's negative-index wrap-around, which turns the
-    # contiguous lane loads into gathers
-    ub = np.uint64(base)
-    s = np.uint64(n8)
+    nb = (lanes + LANES - 1) >> 3
+    s = np.int64(nb << 3)
+    b0 = np.int64(base)
     best = _NO_HIT
-    for k in range(n8):
-        i = ub + np.uint64(k)
-        t, a, b = _lane_tuv(nodes, i, s, o, d)
-        ok = ((a >= 0.0) & (b >= 0.0) & (a <= 1.0) & (b <= 1.0) & (a + b <= nodes[i + _U9 * s])
-              & (t > 0.0) & (t > tmin) & (t < tmax))
-        # no branch (a conditional expression here would stop the vectoriser): a miss ors in all ones
-        key = (_f64_bits(t) & _KEY_HIGH) | k | ((np.int64(ok) - 1) & _NO_HIT)
+    for blk in range(nb):
+        k0 = np.int64(blk << 3)
+        key = block8(nodes, b0 + k0, s, o, d, tmin, tmax, k0, scratch, keep)
         best = key if key < best else best
     if best == _NO_HIT:
         return -1
@@ -137,64 +166,87 @@ def _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax):
 
 
 @njit(cache=True, error_model="numpy", forceinline=True)
-def _lane_prim(nodes, base, lanes, lane, o, d):
-    """(t, rank of the primitive in its leaf, u, v) of a lane :func:`_leaf_lanes` found hit: the
-    same arithmetic again (the same t), and a parallelogram's (a, b) mapped to the triangle of the
-    pair that contains the point and that triangle's barycentrics (bvh_build module docstring)."""
+def _lane_prim(nodes, base, lanes, lane, o, d, scratch, keep):
+    """(t, rank of the primitive in its leaf, u, v) of a lane :func:`_leaf_lanes` found hit (its
+    t, a, b from the scratch), a parallelogram's (a, b) mapped to the triangle of the pair that
+    contains the point and that triangle's barycentrics (bvh_build module docstring)."""
     s = np.uint64(((lanes + LANES - 1) >> 3) << 3)
     i = np.uint64(base) + np.uint64(lane)
-    t, a, b = _lane_tuv(nodes, i, s, o, d)
-    meta = int(nodes[i + np.uint64(ROW_META) * s])
-    rank = meta >> 3
-    if meta & K_QUAD == 0:
-        return t, rank, a, b
-    if a >= b:                                   # triangle A = (p0, p0 + E1, p0 + E1 + E3)
-        if meta & K_A_DIAG:
-            return t, rank, b, a - b
-        return t, rank, a - b, b
-    if meta & K_B_DIAG:                          # triangle B = (p0, p0 + E1 + E3, p0 + E3)
-        return t, rank + 1, a, b - a
-    return t, rank + 1, b - a, a
+    if keep:
+        t, a, b = scratch[lane], scratch[lane + _SCRATCH], scratch[lane + 2 * _SCRATCH]
+    else:                                        # a caller's short stack: compute the lane again
+        t, a, b = _lane_tuv(nodes, i, s, o, d)
+    meta = np.int64(nodes[i + np.uint64(ROW_META) * s])
+    # integer arithmetic and selects, no branch: which triangle of a quad holds the point is a coin
+    # toss per ray, and the mispredicted branches cost ~12 ns per hit (more than the rest of this).
+    # A = (p0, p0 + E1, p0 + E1 + E3) holds a >= b, B = (p0, p0 + E1 + E3, p0 + E3) the rest; in both
+    # the barycentrics are (|a - b|, min(a, b)), swapped when that triangle's e1 is the diagonal
+    in_a = np.int64(a >= b)
+    quad = meta & K_QUAD
+    swap = quad & (((meta >> 1) & in_a) | ((meta >> 2) & (1 - in_a)))     # K_A_DIAG, K_B_DIAG bits
+    rank = (meta >> 3) + (quad & (1 - in_a))
+    x = abs(a - b) if quad != 0 else a
+    y = min(a, b) if quad != 0 else b
+    return t, rank, y if swap != 0 else x, x if swap != 0 else y
 
 
-@njit(cache=True, error_model="numpy")
+# no reference counting (_nrt=False) in the traversals: they allocate nothing, and a count on the
+# scratch view would be a non-inlinable call per ray
+@njit(cache=True, error_model="numpy", _nrt=False)
 def closest_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """(t, prim, u, v) of the nearest hit in (tmin, tmax); prim = -1 on a miss."""
     return closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
+def _leaf_closest(nodes, node_info, prims, prim_info, node, o, d, tmin, best, scratch, keep):
+    """``best`` = (t, prim, u, v) updated with the hits of leaf ``node`` nearer than best t."""
+    best_t, best_p, best_u, best_v = best
+    first = node_info[node, 0]
+    ntri = node_info[node, 2]                 # a leaf's triangles come first
+    if ntri > 0:
+        lanes = node_info[node, 4]
+        k = _leaf_lanes(nodes, node_info[node, 3], lanes, o, d, tmin, best_t, scratch, keep)
+        if k >= 0:
+            best_t, r, best_u, best_v = _lane_prim(nodes, node_info[node, 3], lanes, k, o, d, scratch, keep)
+            best_p = first + r
+    for i in range(first + ntri, first + node_info[node, 1]):
+        t, u, v = intersect_prim(prims, prim_info[i, INFO_TYPE], i, o, d, tmin, best_t)
+        if t < best_t:
+            best_t, best_p, best_u, best_v = t, i, u, v
+    return best_t, best_p, best_u, best_v
+
+
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
 def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """:func:`closest_hit` inlined into the caller by LLVM (the path tracers' hot loop: a call
     passes four arrays as ~30 scalars, which costs more than a small scene's whole traversal)."""
-    # the slab tests' reciprocal direction: not needed when the whole tree is one leaf
-    inv = _inv_dir(d) if node_info[0, 1] == 0 else (0.0, 0.0, 0.0)
-    best_t = tmax
-    best_p = -1
-    best_u = 0.0
-    best_v = 0.0
+    scratch = _scratch(stack)
+    keep = scratch.shape[0] >= 3 * _SCRATCH     # False for a caller's short stack (then: recompute)
+    best = (tmax, -1, 0.0, 0.0)
+    if node_info[0, 1] > 0:                     # the whole tree is one leaf (small scenes)
+        best = _leaf_closest(nodes, node_info, prims, prim_info, 0, o, d, tmin, best, scratch, keep)
+    else:
+        best = _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep)
+    if best[1] < 0:
+        return math.inf, -1, 0.0, 0.0
+    return best
+
+
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
+def _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep):
+    """Front-to-back traversal of a tree whose root is an interior node."""
+    inv = _inv_dir(d)
     sp = 0
     node = 0
     while True:
-        first = node_info[node, 0]
-        count = node_info[node, 1]
-        if count > 0:
-            ntri = node_info[node, 2]                 # a leaf's triangles come first
-            if ntri > 0:
-                lanes = node_info[node, 4]
-                k = _leaf_lanes(nodes, node_info[node, 3], lanes, o, d, tmin, best_t)
-                if k >= 0:
-                    best_t, r, best_u, best_v = _lane_prim(nodes, node_info[node, 3], lanes, k, o, d)
-                    best_p = first + r
-            for i in range(first + ntri, first + count):
-                t, u, v = intersect_prim(prims, prim_info[i, INFO_TYPE], i, o, d, tmin, best_t)
-                if t < best_t:
-                    best_t, best_p, best_u, best_v = t, i, u, v
+        if node_info[node, 1] > 0:
+            best = _leaf_closest(nodes, node_info, prims, prim_info, node, o, d, tmin, best, scratch, keep)
         else:
-            a = first
-            b = first + 1
-            ta = _box_hit(nodes, a, o, inv, tmin, best_t)
-            tb = _box_hit(nodes, b, o, inv, tmin, best_t)
+            a = node_info[node, 0]
+            b = a + 1
+            ta = _box_hit(nodes, a, o, inv, tmin, best[0])
+            tb = _box_hit(nodes, b, o, inv, tmin, best[0])
             if tb < ta:                        # visit the nearer child first
                 a, b = b, a
                 ta, tb = tb, ta
@@ -212,26 +264,26 @@ def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, sta
         while sp > 0:
             sp -= 1
             node = stack[sp]
-            if _box_hit(nodes, node, o, inv, tmin, best_t) < math.inf:
+            if _box_hit(nodes, node, o, inv, tmin, best[0]) < math.inf:
                 found = True
                 break
         if not found:
             break
-    if best_p < 0:
-        return math.inf, -1, 0.0, 0.0
-    return best_t, best_p, best_u, best_v
+    return best
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
-    """Index of some primitive hit in (tmin, tmax), or -1. With ``skip_null``, primitives whose
-    material is a null BSDF (``materials[m, 0] == NULL``) are ignored (they only bound media)."""
+    """Index of some primitive hit in (tmin, tmax), or -1 (of a parallelogram lane: its first
+    triangle). With ``skip_null``, primitives whose material is a null BSDF
+    (``materials[m, 0] == NULL``) are ignored (they only bound media)."""
     return any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials)
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
 def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`)."""
+    scratch = _scratch(stack)
     inv = (0.0, 0.0, 0.0)
     if node_info[0, 1] == 0:          # a tree, not one leaf: cull by the root's box first
         inv = _inv_dir(d)
@@ -246,9 +298,11 @@ def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, 
             ntri = node_info[node, 2]
             if ntri > 0 and not skip_null:
                 lanes = node_info[node, 4]
-                k = _leaf_lanes(nodes, node_info[node, 3], lanes, o, d, tmin, tmax)
-                if k >= 0:
-                    return first + _lane_prim(nodes, node_info[node, 3], lanes, k, o, d)[1]
+                base = node_info[node, 3]
+                k = _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, False)   # any hit will do
+                if k >= 0:                       # the lane's first triangle (of a parallelogram: A)
+                    n8 = np.uint64(((lanes + LANES - 1) >> 3) << 3)
+                    return first + (int(nodes[np.uint64(base) + np.uint64(k) + np.uint64(ROW_META) * n8]) >> 3)
                 ntri_done = ntri
             else:
                 ntri_done = 0
