@@ -47,11 +47,11 @@ def square_to_uniform_disk_concentric(u1, u2):
     y = 2.0 * u2 - 1.0
     if x == 0.0 and y == 0.0:
         return 0.0, 0.0
-    if abs(x) > abs(y):
-        s, c = sincos_quarter((math.pi / 4.0) * (y / x))
-        return x * c, x * s
-    s, c = sincos_quarter((math.pi / 4.0) * (x / y))
-    return y * s, y * c
+    # selects, not branches: the sector is a coin toss per sample (a mispredicted branch per bounce)
+    wide = abs(x) > abs(y)
+    r = x if wide else y
+    s, c = sincos_quarter((math.pi / 4.0) * ((y if wide else x) / r))
+    return r * (c if wide else s), r * (s if wide else c)
 
 
 @njit(cache=True)
