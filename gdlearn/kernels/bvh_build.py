@@ -2,7 +2,7 @@
 
 Binned surface-area heuristic (Wald 2007, "On fast construction of SAH-based bounding volume
 hierarchies"), ``N_BINS`` bins per axis, with the costs of the traversal measured on this machine
-(``C_*``, benchmarks/bench_kernels.py), leaves of at most ``LEAF_MAX`` items.
+(``C_*``, benchmarks/bench_pt_traversal.py --sweep), leaves of at most ``LEAF_MAX`` items.
 
 The BVH is built over *items*: a triangle, a *quad* -- two consecutive triangles of one shape that
 share their first vertex and their diagonal and together form a parallelogram (every rectangle and
@@ -24,7 +24,7 @@ from .geometry import P_TRIANGLE
 
 N_BINS = 12
 #: SAH costs in units of one lane of a vectorised leaf, measured on this machine with
-#: benchmarks/bench_kernels.py: visiting an interior node (two slab tests, ordering, stack), starting
+#: benchmarks/bench_pt_traversal.py: visiting an interior node (two slab tests, ordering, stack), starting
 #: a leaf, testing a sphere or disk (scalar). A leaf holds at most LEAF_MAX items (a lane's index
 #: must fit the 8 low bits of a nearest-hit key).
 C_NODE = 16.0
