@@ -3,9 +3,10 @@
 * the contract: ``rand(seed, key, sample, dim)`` is a pure function of the four coordinates and
   equals ``rand_at(path_state(seed, key, sample), dim)`` bit for bit (the path tracer uses the
   second form, random-sequence replay and the gradient kernels the first);
-* the construction: along a path the numbers are SplitMix64's stream seeded by the path state --
-  checked against SplitMix64's published first outputs for seed 0 and against a pure-Python
-  reimplementation (independent of numba);
+* the construction: a chain of four SplitMix64 finalisers (checked against SplitMix64's published
+  first outputs for seed 0) whose first three hash the path -- checked against a pure-Python
+  reimplementation of the chain (independent of numba), which pins the numbers themselves: the
+  split into path state and dimension must not change a single bit;
 * statistics (chi^2 against the uniform law, at a false-alarm rate of 1e-4 per test): numbers
   along one path, across pixels for one dimension, across samples, and pairs of neighbouring
   dimensions / neighbouring pixels (the places a weak counter-based hash shows correlations).
@@ -15,7 +16,7 @@ import pytest
 from numba import njit
 from scipy import stats
 
-from gdlearn.kernels.rng import hash_at, path_state, rand, rand_at
+from gdlearn.kernels.rng import hash_at, mix64, path_state, rand, rand_at
 
 ALPHA = 1e-4
 M64 = (1 << 64) - 1
@@ -32,6 +33,10 @@ def _path_state_py(seed, key, sample):
     h = _mix64_py((seed * GOLDEN + 1) & M64)
     h = _mix64_py(h ^ (key * GOLDEN & M64))
     return _mix64_py(h ^ ((sample * GOLDEN + 0x632BE59BD9B4E019) & M64))
+
+
+def _hash4_py(seed, key, sample, dim):
+    return _mix64_py(_path_state_py(seed, key, sample) ^ ((dim * GOLDEN + 0x85157AF5) & M64))
 
 
 @njit(cache=True)
@@ -75,14 +80,19 @@ def test_both_forms_agree_bit_for_bit():
         assert _two_forms(int(seed), int(key), int(sample), 200) == 200
 
 
-def test_along_a_path_it_is_splitmix64():
-    # SplitMix64 (Steele et al. 2014) seeded with 0: its first four outputs, as published
-    assert [int(x) for x in _hashes(np.uint64(0), 4)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4,
-                                                          0x06C45D188009454F, 0xF88BB8A8724C81EC]
+@njit(cache=True)
+def _mix(z):
+    return mix64(z)
+
+
+def test_the_hash_is_the_chain_of_four_finalisers():
+    # the finaliser: SplitMix64 (Steele et al. 2014) seeded with 0 outputs mix64(k * GOLDEN), k = 1, 2, ...
+    assert [int(_mix(np.uint64((k * GOLDEN) & M64))) for k in range(1, 5)] == [
+        0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F, 0xF88BB8A8724C81EC]
     for seed, key, sample in [(0, 0, 0), (7, 12345, 3), (2**31 - 1, 65535, 1023)]:
         h = _path_state_py(seed, key, sample)
         assert int(path_state(seed, key, sample)) == h
-        want = [_mix64_py((h + (d + 1) * GOLDEN) & M64) for d in range(16)]
+        want = [_hash4_py(seed, key, sample, d) for d in range(16)]
         assert [int(x) for x in _hashes(np.uint64(h), 16)] == want
         assert [rand(seed, key, sample, d) for d in range(16)] == [(w >> 11) * 2.0**-53 for w in want]
 

@@ -10,27 +10,21 @@ number is a pure function of its coordinates, never of a stream's history. Three
 
 ``key`` is usually the pixel index ``y * width + x``.
 
-Construction (two stages, so a path pays the expensive part once):
+The hash is SplitMix64's finaliser (Steele et al. 2014, "Fast splittable pseudorandom number
+generators"; it passes BigCrush as a counter-based generator), applied in a chain of four -- one per
+coordinate -- so it falls into two stages, and a path pays the expensive one once:
 
-1. ``path_state(seed, key, sample)``: three chained SplitMix64 finalisers (Steele et al. 2014,
-   "Fast splittable pseudorandom number generators") hash the path's coordinates into a 64-bit
-   state ``h``. For fixed other coordinates each stage is a bijection (multiplication by the odd
-   golden-ratio constant, xor with a constant, and the finaliser are all invertible mod 2^64), so
-   two pixels -- or two samples of a pixel -- never share a state; unrelated coordinates collide
-   with probability 2^-64, as for any 64-bit hash.
-2. ``rand_at(h, dim) = mix64(h + (dim + 1) * GOLDEN)``: exactly SplitMix64's output function with
-   ``h`` as its seed -- dimension ``dim`` of a path is the (dim + 1)-th number of the SplitMix64
-   stream seeded by ``h``. SplitMix64 (a Weyl sequence through the finaliser) passes BigCrush
-   (Steele et al. 2014, Sec. 5), so the numbers *along* a path are as good as SplitMix64's.
-   *Across* paths, two streams can only repeat each other shifted by k dimensions if their states
-   differ by exactly k * GOLDEN (mod 2^64): for D dimensions that is a chance of ~2 D / 2^64 per
-   pair of paths (with D = 100: one pair in ~10^17), the same order as a collision of the single
-   64-bit hash of all four coordinates used before.
+1. ``path_state(seed, key, sample)``: the first three finalisers hash the path's coordinates into a
+   64-bit state ``h``. Each stage is a bijection of its coordinate for fixed others
+   (multiplication by the odd golden-ratio constant, xor with a constant, the finaliser are all
+   invertible mod 2^64): two pixels -- or two samples of a pixel -- never share a state.
+2. ``rand_at(h, dim)``: the fourth finaliser of ``h ^ (dim * GOLDEN + C)``, again a bijection of
+   ``dim``: the numbers along a path are distinct finaliser outputs of distinct inputs.
 
-``rand(seed, key, sample, dim) = rand_at(path_state(seed, key, sample), dim)`` is the contract: a
-pure function of its four coordinates. Kernels that draw many numbers for one path compute the
-state once and call :func:`rand_at` (one finaliser per number instead of four; measured on the
-Cornell box: see benchmarks/README.md); both forms give identical bits.
+``rand(seed, key, sample, dim) = rand_at(path_state(seed, key, sample), dim)`` is the contract, bit
+for bit: the same numbers as before the split (seed-calibrated statistical tests and stored
+results keep their meaning). The path kernels compute the state once per path and call
+:func:`rand_at`: one finaliser per number instead of four.
 """
 import numpy as np
 from numba import njit
@@ -39,6 +33,7 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _C_SAMPLE = np.uint64(0x632BE59BD9B4E019)
+_C_DIM = np.uint64(0x85157AF5)
 _S30 = np.uint64(30)
 _S27 = np.uint64(27)
 _S31 = np.uint64(31)
@@ -58,7 +53,7 @@ def mix64(z):
 
 @njit(cache=True, forceinline=True)
 def path_state(seed, key, sample):
-    """The 64-bit state of the path (seed, key, sample): the seed of its SplitMix64 stream."""
+    """The 64-bit state of the path (seed, key, sample): the first three stages of :func:`hash4`."""
     h = mix64(np.uint64(seed) * _GOLDEN + _ONE)
     h = mix64(h ^ (np.uint64(key) * _GOLDEN))
     return mix64(h ^ (np.uint64(sample) * _GOLDEN + _C_SAMPLE))
@@ -66,8 +61,8 @@ def path_state(seed, key, sample):
 
 @njit(cache=True, forceinline=True)
 def hash_at(h, dim):
-    """The 64-bit hash of dimension ``dim`` of the path with state ``h`` (SplitMix64 output dim+1)."""
-    return mix64(h + (np.uint64(dim) + _ONE) * _GOLDEN)
+    """The 64-bit hash of dimension ``dim`` of the path with state ``h`` (the last stage)."""
+    return mix64(h ^ (np.uint64(dim) * _GOLDEN + _C_DIM))
 
 
 @njit(cache=True, forceinline=True)
