@@ -6,8 +6,10 @@
 
 Same scene file, resolution, spp, max_depth and thread count for every renderer, all in one run.
 Every renderer is warmed first (gdlearn: numba JIT via the integrator's ``compile``; Mitsuba: one
-render of the same size, which for ``llvm_ad_rgb`` compiles its kernels), then timed ``--repeat``
-times; the table shows the median. The issue's goal is gdlearn >= 1.0x ``llvm_ad_rgb``.
+render of the same size, which for ``llvm_ad_rgb`` compiles its kernels), then the renderers are
+timed ``--repeat`` times *round-robin* (so load from other processes hits them alike); the table
+shows the median wall time, and the samples per CPU second of the process. The issue's goal is
+gdlearn >= 1.0x ``llvm_ad_rgb``.
 
 gdlearn's cold start is measured separately, in fresh processes: once with an empty numba cache
 (``NUMBA_CACHE_DIR`` pointed at a new temporary folder: every kernel compiles) and once with the
@@ -48,23 +50,25 @@ def parse_args(argv=None):
     return p.parse_args(argv)
 
 
-def time_gdlearn(path, a) -> dict:
-    from gdlearn.integrators import make, render
+def gdlearn_runner(path, a):
+    """(warm-up seconds, run(r) -> (wall s, CPU s, image mean)) for gdlearn's pt."""
+    from gdlearn.integrators import make
     from gdlearn.scene.load import load
 
     scene = load(path, res=a.res, max_depth=a.max_depth)
-    times, img = [], None
-    compile_s = None
-    for r in range(a.repeat):
+    warm = make("pt", scene, seed=0, spp_per_pass=a.spp, threads=a.threads).warmup()   # JIT, cached
+
+    def run(r):
         integ = make("pt", scene, seed=r, spp_per_pass=a.spp, threads=a.threads)
-        frame = render(integ, spp=a.spp)               # render() warms the JIT first, uncounted
-        compile_s = frame.timings.get("compile", 0.0) if compile_s is None else compile_s
-        times.append(frame.elapsed)
-        img = frame.primal
-    return dict(seconds=statistics.median(times), mean=float(np.mean(img)), compile=compile_s)
+        integ.warmup()                                   # loads the compiled kernels: not timed
+        c0 = time.process_time()
+        frame = integ.step()                             # one pass of a.spp samples per pixel
+        return frame.elapsed, time.process_time() - c0, float(np.mean(frame.primal))
+    return warm, run
 
 
-def time_mitsuba(path, a, variant) -> dict:
+def mitsuba_runner(path, a, variant):
+    """(first render seconds, run(r) -> (wall s, CPU s, image mean)) for a Mitsuba variant."""
     mi = import_mitsuba()
     mi.set_variant(variant)
     set_threads(a.threads)
@@ -72,12 +76,28 @@ def time_mitsuba(path, a, variant) -> dict:
     t0 = time.perf_counter()
     np.array(mi.render(scene, seed=0, spp=a.spp))       # warm-up: llvm compiles its kernels here
     first = time.perf_counter() - t0
-    times, img = [], None
-    for r in range(a.repeat):
-        t0 = time.perf_counter()
+
+    def run(r):
+        mi.set_variant(variant)
+        set_threads(a.threads)
+        t0, c0 = time.perf_counter(), time.process_time()
         img = np.array(mi.render(scene, seed=r + 1, spp=a.spp))   # np.array forces evaluation
-        times.append(time.perf_counter() - t0)
-    return dict(seconds=statistics.median(times), mean=float(np.mean(img[..., :3])), first=first)
+        return time.perf_counter() - t0, time.process_time() - c0, float(np.mean(img[..., :3]))
+    return first, run
+
+
+def time_round_robin(runners, repeat) -> dict:
+    """Time every renderer ``repeat`` times, round-robin (a burst of load from other processes then
+    hits every renderer alike): median wall and CPU seconds, and the last image mean."""
+    runs = {who: [] for who in runners}
+    for r in range(repeat):
+        for who, (_, run) in runners.items():
+            runs[who].append(run(r))
+    out = {}
+    for who, res in runs.items():
+        out[who] = dict(seconds=statistics.median(x[0] for x in res), cpu=statistics.median(x[1] for x in res),
+                        mean=res[-1][2], warm=runners[who][0])
+    return out
 
 
 _COLD = r"""
@@ -124,25 +144,26 @@ def main(argv=None) -> int:
     rows = []
     for name in a.scenes:
         path = ROOT / "scenes" / f"{name}.xml"
-        g = time_gdlearn(path, a)
-        print(f"# {name}: gdlearn pt {g['seconds']:.2f} s", file=sys.stderr, flush=True)
-        res = {"gdlearn pt": g}
+        runners = {"gdlearn pt": gdlearn_runner(path, a)}
         for v in variants:
-            res[f"mitsuba {v}"] = time_mitsuba(path, a, v)
-            print(f"# {name}: mitsuba {v} {res[f'mitsuba {v}']['seconds']:.2f} s", file=sys.stderr,
-                  flush=True)
+            runners[f"mitsuba {v}"] = mitsuba_runner(path, a, v)
+        res = time_round_robin(runners, a.repeat)
+        g = res["gdlearn pt"]
         for who, r in res.items():
-            rows.append((name, who, r["seconds"], n / r["seconds"] / 1e6, g["mean"] / r["mean"],
-                         r["seconds"] / g["seconds"], r.get("first", r.get("compile"))))
-    print(f"\n{'scene':12s} {'renderer':22s} {'seconds':>8s} {'Msamples/s':>11s} "
+            print(f"# {name}: {who} {r['seconds']:.2f} s", file=sys.stderr, flush=True)
+            rows.append((name, who, r["seconds"], n / r["seconds"] / 1e6, n / r["cpu"] / 1e6,
+                         g["mean"] / r["mean"], r["seconds"] / g["seconds"], r["warm"]))
+    print(f"\n{'scene':12s} {'renderer':22s} {'seconds':>8s} {'Msamples/s':>11s} {'per CPU s':>10s} "
           f"{'gdlearn speed-up':>17s} {'mean ratio':>11s} {'warm-up s':>10s}")
-    for scene, who, sec, msps, mean_ratio, speedup, warm in rows:
-        print(f"{scene:12s} {who:22s} {sec:8.2f} {msps:11.2f} {speedup:16.2f}x {mean_ratio:11.4f} "
-              f"{warm:10.2f}")
+    for scene, who, sec, msps, mcpu, mean_ratio, speedup, warm in rows:
+        print(f"{scene:12s} {who:22s} {sec:8.2f} {msps:11.2f} {mcpu:10.2f} {speedup:16.2f}x "
+              f"{mean_ratio:11.4f} {warm:10.2f}")
     print("\n# gdlearn speed-up = (this renderer's seconds) / (gdlearn's seconds): > 1 means gdlearn"
-          " is faster.\n# mean ratio = gdlearn image mean / this image mean (same work: ~1 up to noise)."
-          "\n# warm-up s: gdlearn = JIT compile time (frame.timings['compile']); Mitsuba = first render"
+          " is faster.\n# per CPU s = samples per second of CPU time of all the process's threads (the"
+          " work, whatever the load).\n# mean ratio = gdlearn image mean / this image mean (same work:"
+          " ~1 up to noise).\n# warm-up s: gdlearn = JIT (numba cache) time; Mitsuba = first render"
           " incl. kernel compilation.")
+    print(f"# load average after the run: {os.getloadavg()[0]:.2f}")
     if not a.no_cold:
         path = ROOT / "scenes" / f"{a.scenes[0]}.xml"
         with tempfile.TemporaryDirectory(prefix="gdlearn-numba-cold-") as d:

@@ -3,9 +3,10 @@ soup of triangles, spheres and disks (the answer must be identical, prim for pri
 import math
 
 import numpy as np
+import pytest
 
 from gdlearn.kernels import geometry as g
-from gdlearn.kernels.bvh import STACK_SIZE, any_hit, build, closest_hit
+from gdlearn.kernels.bvh import STACK_SIZE, any_hit, build_scene, closest_hit
 from gdlearn.scene.compile import _bounds
 from gdlearn.kernels.layout import MAT_WIDTH
 
@@ -33,32 +34,93 @@ def _soup(n, rng):
     return np.array(rows), np.array(types, np.int32)
 
 
-def test_closest_and_any_hit_match_brute_force():
-    rng = np.random.default_rng(4)
-    rows, types = _soup(300, rng)
+def _scene(rows, types, shape_of):
     areas, lo, hi = _bounds(rows, types)
-    nodes, node_info, order = build(lo, hi)
+    order, nodes, node_info = build_scene(rows, types, shape_of, lo, hi)
     rows, types = np.ascontiguousarray(rows[order]), types[order]
     info = np.zeros((len(rows), g.INFO_WIDTH), np.int32)
     info[:, g.INFO_TYPE] = types
+    info[:, g.INFO_SHAPE] = np.asarray(shape_of)[order]
+    return rows, types, info, nodes, node_info
+
+
+def _brute(rows, types, o, d, tmax):
+    best, bp = tmax, -1
+    for i in range(len(rows)):
+        t, u, v = g.intersect_prim(rows, types[i], i, o, d, 0.0, best)
+        if t < best:
+            best, bp = t, i
+    return best, bp
+
+
+def _ray(rng, lo, hi):
+    d = rng.normal(size=3)
+    return tuple(rng.uniform(lo, hi, 3)), tuple(d / np.linalg.norm(d))
+
+
+def test_closest_and_any_hit_match_brute_force():
+    rng = np.random.default_rng(4)
+    rows, types = _soup(300, rng)
+    rows, types, info, nodes, node_info = _scene(rows, types, np.arange(len(rows)))
     mats = np.zeros((1, MAT_WIDTH))
     stack = np.empty(STACK_SIZE, np.int32)
     # every primitive lies in exactly one leaf
     leaves = node_info[node_info[:, 1] > 0]
-    assert sorted(i for f, c, _ in leaves for i in range(f, f + c)) == list(range(len(rows)))
+    assert sorted(i for f, c, *_ in leaves for i in range(f, f + c)) == list(range(len(rows)))
+    # a leaf's triangles come first and are counted (they are tested as one vectorised block)
+    for f, c, ntri, _, lanes in leaves:
+        assert np.all(types[f:f + ntri] == g.P_TRIANGLE) and np.all(types[f + ntri:f + c] != g.P_TRIANGLE)
+        assert lanes == ntri               # no quads in a soup of unrelated triangles
+    assert leaves[:, 2].max() > 1          # some blocks test several triangles at once
     hits = 0
     for _ in range(3000):
-        o = tuple(rng.uniform(-7, 7, 3))
-        d = rng.normal(size=3)
-        d = tuple(d / np.linalg.norm(d))
+        o, d = _ray(rng, -7, 7)
         tmax = rng.choice([math.inf, 3.0])
-        best, bp = tmax, -1
-        for i in range(len(rows)):
-            t, u, v = g.intersect_prim(rows, types[i], i, o, d, 0.0, best)
-            if t < best:
-                best, bp = t, i
+        best, bp = _brute(rows, types, o, d, tmax)
         t, p, u, v = closest_hit(nodes, node_info, rows, info, o, d, 0.0, tmax, stack)
         assert p == bp and (p < 0 or t == best)
         assert (any_hit(nodes, node_info, rows, info, o, d, 0.0, tmax, stack, False, mats) >= 0) == (bp >= 0)
         hits += bp >= 0
     assert hits > 300       # the test exercised hits, not only misses
+
+
+def test_quads_hit_the_triangle_that_contains_the_point():
+    """Rectangles and cube faces (two triangles each, both windings) become one parallelogram lane;
+    a hit must still name the triangle of the pair that contains the point, with its barycentrics."""
+    from gdlearn.scene.compile import compile_scene
+    from gdlearn.scene.load import load
+    from pathlib import Path
+    sa = compile_scene(load(Path(__file__).resolve().parents[1] / "scenes" / "cornell-box.xml", res=8))
+    leaves = sa.node_info[sa.node_info[:, 1] > 0]
+    assert leaves[:, 4].sum() * 2 == leaves[:, 2].sum()      # every triangle is half of a quad lane
+    rows, types = sa.prims, sa.prim_info[:, g.INFO_TYPE]
+    stack = np.empty(STACK_SIZE, np.int32)
+    short = np.empty(64, np.int32)
+    rng = np.random.default_rng(7)
+    hits = 0
+    for _ in range(4000):
+        o, d = _ray(rng, -0.99, 0.99)          # inside the room (open at +z: some rays escape)
+        best, bp = _brute(rows, types, o, d, math.inf)
+        t, p, u, v = closest_hit(sa.nodes, sa.node_info, rows, sa.prim_info, o, d, 0.0, math.inf, stack)
+        assert (p >= 0) == (bp >= 0)
+        if p < 0:
+            continue
+        assert t == pytest.approx(best, rel=1e-12)
+        # p may differ from bp only at a tie: an edge, or coplanar faces (a box standing on the floor)
+        q = rows[p, 0:3] + u * rows[p, 3:6] + v * rows[p, 6:9]
+        assert np.allclose(q, np.array(o) + t * np.array(d), atol=1e-12)
+        assert min(u, v) >= -1e-12 and u + v <= 1 + 1e-12
+        # a short stack (no room for the lane scratch) gives the same answer by recomputing the lane
+        assert closest_hit(sa.nodes, sa.node_info, rows, sa.prim_info, o, d, 0.0, math.inf, short) == (t, p, u, v)
+        hits += p == bp
+    assert hits > 3000
+
+
+def test_quad_pairs_are_detected_only_for_parallelograms():
+    from gdlearn.kernels.bvh_build import _quad
+    p0, a, b = np.zeros(3), np.array([1.0, 0, 0]), np.array([0.3, 1.0, 0])
+    tri = lambda e1, e2: np.concatenate([p0, e1, e2, np.zeros(g.PRIM_WIDTH - 9)])     # noqa: E731
+    assert _quad(tri(a, a + b), tri(a + b, b)) is not None          # (p0 p1 p2), (p0 p2 p3)
+    assert _quad(tri(a + b, a), tri(b, a + b)) is not None          # the other windings
+    assert _quad(tri(a, a + b), tri(a + b, 1.1 * b)) is None        # a trapezoid
+    assert _quad(tri(a, 0.5 * a + b), tri(0.5 * a + b, b)) is None  # not split along a diagonal

@@ -140,3 +140,23 @@ def test_mis_heuristics_moderate_values_match_textbook():
     for a, b in rng.uniform(0.01, 10.0, size=(200, 2)):
         assert S.power_heuristic(a, b) == pytest.approx(a * a / (a * a + b * b), rel=1e-12)
         assert S.balance_heuristic(a, b) == pytest.approx(a / (a + b), rel=1e-12)
+
+
+def test_sincos_quarter_matches_libm_to_an_ulp_or_two():
+    a = np.concatenate([np.linspace(-math.pi / 4, math.pi / 4, 20001), [0.0, 1e-300, -1e-8, math.pi / 4]])
+    for x in a:
+        s, c = S.sincos_quarter(x)
+        assert abs(s - math.sin(x)) <= 2.5e-16 * abs(math.sin(x)) + 1e-320
+        assert abs(c - math.cos(x)) <= 2.5e-16 * math.cos(x)
+
+
+def test_concentric_disk_is_mitsubas_formula():
+    """The same (u1, u2) gives Mitsuba's point (warp.h, written here with libm's sin and cos)."""
+    for u1, u2 in np.random.default_rng(9).random((5000, 2)):
+        x, y = 2 * u1 - 1, 2 * u2 - 1
+        if abs(x) > abs(y):
+            r, phi = x, math.pi / 4 * (y / x)
+        else:
+            r, phi = y, math.pi / 2 - math.pi / 4 * (x / y)
+        assert S.square_to_uniform_disk_concentric(u1, u2) == pytest.approx((r * math.cos(phi), r * math.sin(phi)),
+                                                                            abs=1e-15)

@@ -9,7 +9,9 @@ updated the same atomic reference counts from both cores, and 2 threads were bar
 
 The per-path kernels live in :mod:`gdlearn.kernels.surface_path` (``path``: surfaces only) and
 :mod:`gdlearn.kernels.volume_path` (``volpath``: homogeneous media, null interfaces, camera medium).
-A scene whose effects plan needs no media never compiles or runs the volume kernel.
+A scene whose effects plan needs no media never compiles or runs the volume kernel. Scenes of
+diffuse triangles lit by area emitters (the Cornell box) are traced in packets of 64 paths
+(:mod:`gdlearn.kernels.surface_packet`): the same image bit for bit, ~1.35x faster per core.
 """
 from __future__ import annotations
 
@@ -22,8 +24,10 @@ from numba import njit, prange
 from ..kernels.bvh import STACK_SIZE
 from ..kernels.camera import camera_ray
 from ..kernels.rng import rand
-from ..kernels.surface_path import radiance_path
-from ..kernels.volume_path import radiance_volpath
+from ..kernels import surface_packet
+from ..kernels.surface_packet import render_row_packet
+from ..kernels.surface_path import radiance_path_inline
+from ..kernels.volume_path import radiance_volpath_inline
 from ..scene.effects import plan as effects_plan
 from ..scene.compile import borrowed, compile_scene
 from .base import PassResult, ProgressiveIntegrator
@@ -57,7 +61,7 @@ def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out
             a2 = 0.0
             for s in range(sample0, sample0 + spp):
                 o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                c = radiance_path_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
                 if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
                     a0 += c[0]
                     a1 += c[1]
@@ -68,6 +72,22 @@ def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out
             out[y, x, 1] = a1 * inv
             out[y, x, 2] = a2 * inv
         bad[y] = nbad
+
+
+@njit(cache=True, error_model="numpy")
+def render_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+    """As :func:`render_rows_path`, traced in packets of paths (:mod:`gdlearn.kernels.surface_packet`;
+    the same image bit for bit, for the scenes it accepts)."""
+    # borrowed arrays: no atomic reference counts shared by the threads (scene.compile.borrowed)
+    _rows_packet(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, out, bad)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
+    for y in prange(out.shape[0]):
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        S, Q, buf = surface_packet.new_buffers()
+        bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
 
 
 @njit(cache=True, error_model="numpy")
@@ -91,7 +111,7 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
             a2 = 0.0
             for s in range(sample0, sample0 + spp):
                 o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_volpath(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                c = radiance_volpath_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
                 if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
                     a0 += c[0]
                     a1 += c[1]
@@ -118,7 +138,8 @@ def compile_by_tracing(integ) -> float:
 
 
 class PathTracer(ProgressiveIntegrator):
-    """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None)``.
+    """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None,
+    packets=None)``.
 
     ``max_depth`` overrides the scene integrator's (Mitsuba's meaning); ``threads`` sets numba's
     thread count for this integrator's passes; ``effects`` (a list of effect names, or a comma
@@ -128,7 +149,7 @@ class PathTracer(ProgressiveIntegrator):
     name = "pt"
 
     def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None,
-                 max_depth=None, sa=None):
+                 max_depth=None, sa=None, packets=None):
         super().__init__(scene, seed=seed, spp_per_pass=spp_per_pass)
         if max_depth is not None:       # the plan must see the depth that will be rendered
             import copy
@@ -151,7 +172,14 @@ class PathTracer(ProgressiveIntegrator):
         # the volume kernel runs only when the plan needs media (or volpath's null-interface rule)
         has_null = any(s.bsdf.type == "null" for s in scene.shapes)
         self.media = bool(self.plan.media) or (scene.integrator.type == "volpath" and has_null)
-        self.kernel = render_rows_volpath if self.media else render_rows_path
+        # packets of paths for the scenes surface_packet accepts (the same image, faster); packets=False
+        # forces the one-path-at-a-time kernel, packets=True insists (ValueError if not eligible)
+        can_pack = not self.media and surface_packet.eligible(self.sa, self.mask, self.max_depth)
+        if packets and not can_pack:
+            raise ValueError("this scene cannot be traced in packets (kernels/surface_packet.py: diffuse BSDFs, area "
+                             "emitters, triangles, no media, every diffuse path kept); fix: packets=None or False")
+        self.packets = can_pack if packets is None else bool(packets) and can_pack
+        self.kernel = render_rows_volpath if self.media else (render_rows_packet if self.packets else render_rows_path)
         self.threads = threads
         self.width, self.height = scene.sensor.film.width, scene.sensor.film.height
 

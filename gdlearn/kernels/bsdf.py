@@ -33,7 +33,7 @@ from gdlearn.kernels.bsdf_plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plas
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _flips(mat, wi):
     """True when Mitsuba's twosided adapter mirrors the query to the front side."""
     t = int(mat[L.MAT_TYPE])
@@ -41,7 +41,7 @@ def _flips(mat, wi):
             and t != L.ROUGHDIELECTRIC and t != L.NULL)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _sample_front(mat, wi, u_lobe, u1, u2):
     t = int(mat[L.MAT_TYPE])
     if t == L.DIFFUSE:
@@ -63,7 +63,7 @@ def _sample_front(mat, wi, u_lobe, u1, u2):
     return ZERO3, ZERO3, 0.0, False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_sample(mat, wi, u_lobe, u1, u2):
     """Sample wo: ``(wo, weight, pdf, is_delta)``; u_lobe picks the lobe, (u1, u2) the direction.
     A non-finite weight or pdf (never observed; a last guard so NaN cannot reach an image) is
@@ -78,7 +78,7 @@ def bsdf_sample(mat, wi, u_lobe, u1, u2):
     return wo, w, pdf, delta
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _eval_front(mat, wi, wo):
     t = int(mat[L.MAT_TYPE])
     if t == L.DIFFUSE:
@@ -94,7 +94,7 @@ def _eval_front(mat, wi, wo):
     return ZERO3         # conductor, dielectric, null: delta lobes only
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_eval(mat, wi, wo):
     """f(wi, wo) |cos wo| of the non-delta lobes, an RGB 3-tuple."""
     if _flips(mat, wi):
@@ -102,7 +102,7 @@ def bsdf_eval(mat, wi, wo):
     return _eval_front(mat, wi, wo)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _pdf_front(mat, wi, wo):
     t = int(mat[L.MAT_TYPE])
     if t == L.DIFFUSE:
@@ -118,7 +118,7 @@ def _pdf_front(mat, wi, wo):
     return 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_pdf(mat, wi, wo):
     """Solid-angle density with which :func:`bsdf_sample` produces wo (non-delta lobes)."""
     if _flips(mat, wi):
@@ -126,25 +126,25 @@ def bsdf_pdf(mat, wi, wo):
     return _pdf_front(mat, wi, wo)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_is_null(mat):
     return int(mat[L.MAT_TYPE]) == L.NULL
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_is_delta_only(mat):
     """True when every lobe is a Dirac delta (NEE / eval are useless there)."""
     t = int(mat[L.MAT_TYPE])
     return t == L.CONDUCTOR or t == L.DIELECTRIC or t == L.NULL
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_has_delta(mat):
     t = int(mat[L.MAT_TYPE])
     return t == L.CONDUCTOR or t == L.DIELECTRIC or t == L.PLASTIC or t == L.NULL
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def bsdf_eta(mat, wi, wo):
     """Relative IOR crossed from wi's side to wo's side (Mitsuba's ``bs.eta``): eta_it on refraction
     through a dielectric, 1 otherwise. The path tracer's Russian roulette uses throughput * eta^2."""

@@ -21,7 +21,7 @@ from gdlearn.kernels.microfacet import mf_D, mf_G, mf_G1, mf_sample
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def conductor_sample(mat, wi):
     """Perfect mirror: wo = reflect(wi), weight = R, discrete probability 1 (delta lobe)."""
     if wi[2] <= 0.0:
@@ -29,7 +29,7 @@ def conductor_sample(mat, wi):
     return reflect(wi), (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2]), 1.0, True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _half_vector(wi, wo):
     hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
     n = math.sqrt(hx * hx + hy * hy + hz * hz)

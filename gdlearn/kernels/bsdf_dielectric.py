@@ -26,7 +26,7 @@ from gdlearn.kernels.microfacet import mf_D, mf_G, mf_G1, mf_pdf, mf_sample
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def dielectric_sample(mat, wi, u_lobe):
     """Smooth interface: reflect with probability F, else refract (both delta lobes).
     Returns (wo, weight, pdf, True) with pdf the discrete lobe probability."""
@@ -43,7 +43,7 @@ def dielectric_sample(mat, wi, u_lobe):
             1.0 - f, True)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 

@@ -4,39 +4,37 @@ Sampling is cosine-weighted (Malley's method), so the sample weight f |cos wo| /
 One-sided like Mitsuba: a query with wi.z <= 0 or wo.z <= 0 gives 0 (``twosided`` is handled by the
 dispatcher in :mod:`gdlearn.kernels.bsdf`).
 """
-import math
-
 from numba import njit
 
 from gdlearn.kernels.layout import MAT_R
-from gdlearn.kernels.sampling import square_to_cosine_hemisphere
+from gdlearn.kernels.sampling import INV_PI, square_to_cosine_hemisphere
 
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_sample(mat, wi, u1, u2):
     """(wo, weight, pdf, is_delta) with wo ~ cos(theta) / pi and weight = R."""
     if wi[2] <= 0.0:
         return ZERO3, ZERO3, 0.0, False
     wo = square_to_cosine_hemisphere(u1, u2)
-    pdf = wo[2] / math.pi
+    pdf = wo[2] * INV_PI
     if pdf <= 0.0:
         return ZERO3, ZERO3, 0.0, False
     return wo, (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2]), pdf, False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_eval(mat, wi, wo):
     """f(wi, wo) |cos wo| = R cos(wo) / pi."""
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return ZERO3
-    s = wo[2] / math.pi
+    s = wo[2] * INV_PI
     return (mat[MAT_R] * s, mat[MAT_R + 1] * s, mat[MAT_R + 2] * s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def diffuse_pdf(mat, wi, wo):
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return 0.0
-    return wo[2] / math.pi
+    return wo[2] * INV_PI

@@ -27,7 +27,7 @@ from gdlearn.kernels.fresnel import fresnel_dielectric, fresnel_diffuse_reflecta
 from gdlearn.kernels.layout import (MAT_ALPHA, MAT_AUX, MAT_DIST, MAT_ETA, MAT_NONLINEAR, MAT_R, MAT_SR,
                                     MAT_TYPE, ROUGHPLASTIC)
 from gdlearn.kernels.microfacet import mf_D, mf_G, mf_G1, mf_sample
-from gdlearn.kernels.sampling import square_to_cosine_hemisphere
+from gdlearn.kernels.sampling import INV_PI, square_to_cosine_hemisphere
 
 ZERO3 = (0.0, 0.0, 0.0)
 AUX_FDR = MAT_AUX           # internal diffuse Fresnel reflectance
@@ -73,7 +73,7 @@ def plastic_sample(mat, wi, u_lobe, u1, u2):
         return reflect(wi), (mat[MAT_SR] * v, mat[MAT_SR + 1] * v, mat[MAT_SR + 2] * v), p_spec, True
     p_diff = 1.0 - p_spec
     wo = square_to_cosine_hemisphere(u1, u2)
-    pdf = p_diff * wo[2] / math.pi
+    pdf = p_diff * wo[2] * INV_PI
     if not pdf > 0.0:
         return ZERO3, ZERO3, 0.0, False
     f_o = fresnel_dielectric(wo[2], eta)[0]
@@ -90,7 +90,7 @@ def plastic_eval(mat, wi, wo):
     f_i = fresnel_dielectric(wi[2], eta)[0]
     f_o = fresnel_dielectric(wo[2], eta)[0]
     a = _diffuse_albedo(mat)
-    s = wo[2] / math.pi * (1.0 - f_i) * (1.0 - f_o) / (eta * eta)
+    s = wo[2] * INV_PI * (1.0 - f_i) * (1.0 - f_o) / (eta * eta)
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
@@ -99,7 +99,7 @@ def plastic_pdf(mat, wi, wo):
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return 0.0
     f_i = fresnel_dielectric(wi[2], mat[MAT_ETA])[0]
-    return (1.0 - _spec_prob(f_i, mat)) * wo[2] / math.pi
+    return (1.0 - _spec_prob(f_i, mat)) * wo[2] * INV_PI
 
 
 # --- rough plastic --------------------------------------------------------------------------------
@@ -137,12 +137,12 @@ def roughplastic_eval(mat, wi, wo):
     t_i = rough_transmittance(mat, cos_i)
     t_o = rough_transmittance(mat, cos_o)
     a = _diffuse_albedo(mat)
-    s = cos_o / math.pi / (eta * eta) * t_i * t_o
+    s = cos_o * INV_PI / (eta * eta) * t_i * t_o
     return (mat[MAT_SR] * spec + a[0] * s, mat[MAT_SR + 1] * spec + a[1] * s,
             mat[MAT_SR + 2] * spec + a[2] * s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _roughplastic_pdf_parts(mat, wi, wo):
     """(coating, base) parts of roughplastic_pdf, lobe-selection probabilities included."""
     cos_i, cos_o = wi[2], wo[2]
@@ -154,7 +154,7 @@ def _roughplastic_pdf_parts(mat, wi, wo):
     n = math.sqrt(hx * hx + hy * hy + hz * hz)
     h = (hx / n, hy / n, hz / n)
     spec = mf_D(dist, alpha, h) * mf_G1(dist, alpha, wi, h) / (4.0 * cos_i)
-    return spec * p_spec, (1.0 - p_spec) * cos_o / math.pi
+    return spec * p_spec, (1.0 - p_spec) * cos_o * INV_PI
 
 
 @njit(cache=True)

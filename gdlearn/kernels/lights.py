@@ -46,7 +46,9 @@ EM_WIDTH = 28
 INV_FOUR_PI = 0.25 / math.pi
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
+# its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def prim_point(prims, prim_info, prim, u1, u2):
     """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
     ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
@@ -89,7 +91,7 @@ def prim_point(prims, prim_info, prim, u1, u2):
     return q, (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _pick_prim(em_cdf, first, count, u):
     """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
     lo = first
@@ -120,7 +122,8 @@ def spot_falloff(emitters, em, d_world):
     return (emitters[em, EM_CUTOFF] - math.acos(min(1.0, c))) * emitters[em, EM_INV_TRANS]
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
     """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
 
@@ -150,13 +153,15 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
         if dist2 == 0.0:
             return -1, q, nq, zero, 0.0, zero, 0.0, 0.0, False
         dist = math.sqrt(dist2)
-        d = (dv[0] / dist, dv[1] / dist, dv[2] / dist)
+        inv_dist = 1.0 / dist          # reciprocals: a division costs several multiplications
+        d = (dv[0] * inv_dist, dv[1] * inv_dist, dv[2] * inv_dist)
         cos_q = -dot(d, nq)
         if cos_q <= 0.0:        # one-sided: the back of an area emitter is black
             return -1, q, nq, d, dist, zero, 0.0, 0.0, False
         pdf_area = sel / emitters[em, EM_AREA]
         pdf = pdf_area * dist2 / cos_q
-        return em, q, nq, d, dist, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, pdf_area, False
+        inv_pdf = cos_q / (pdf_area * dist2)
+        return em, q, nq, d, dist, (rgb[0] * inv_pdf, rgb[1] * inv_pdf, rgb[2] * inv_pdf), pdf, pdf_area, False
     if et == E_POINT or et == E_SPOT:
         q = (emitters[em, EM_P], emitters[em, EM_P + 1], emitters[em, EM_P + 2])
         dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
@@ -186,7 +191,8 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
     return em, q, zero, d, r2, (rgb[0] / pdf, rgb[1] / pdf, rgb[2] / pdf), pdf, 0.0, False
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def emitter_pdf(emitters, em, p, q, nq):
     """Solid-angle pdf at ``p`` with which :func:`sample_emitter` would produce the emitter point
     ``q`` (normal ``nq``) of emitter ``em`` (area or constant; delta emitters: 0). For constant
@@ -207,7 +213,8 @@ def emitter_pdf(emitters, em, p, q, nq):
     return dist2 / (cos_q * emitters[em, EM_AREA] * n_em)
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def eval_emitter(emitters, em, nq, d):
     """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
     shading normal ``nq`` (zero from behind); constant emitters ignore nq."""

@@ -17,7 +17,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from .bvh import STACK_SIZE, any_hit, closest_hit
+from .bvh import STACK_SIZE, any_hit_inline, closest_hit
 from .camera import camera_raster, camera_ray  # noqa: F401  (re-exported)
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
@@ -50,7 +50,9 @@ def intersect(sa, o, d, tmin, tmax, stack):
     return True, t, prim, p, ng, ns, dot(d, ng) < 0.0
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
+# its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def shadow_ray(p, ng, q):
     """(origin, unit direction, tmax) of the segment from surface point p (geometric normal ng;
     zeros for a point in a medium) to q. The origin is pushed off p's surface and the direction and
@@ -65,10 +67,12 @@ def shadow_ray(p, ng, q):
     dist = math.sqrt(dot(d, d))
     if dist == 0.0:
         return o, (0.0, 0.0, 1.0), 0.0
-    return o, (d[0] / dist, d[1] / dist, d[2] / dist), dist * (1.0 - SHADOW_EPS)
+    inv = 1.0 / dist
+    return o, (d[0] * inv, d[1] * inv, d[2] * inv), dist * (1.0 - SHADOW_EPS)
 
 
-@njit(cache=True, error_model="numpy")
+# forceinline: as above
+@njit(cache=True, error_model="numpy", forceinline=True)
 def occluded(sa, p, ng, q, stack):
     """True if anything blocks the segment from surface point p (geometric normal ng; pass zeros
     for a point in a medium) to q. Null-BSDF surfaces block too (in media they are crossed instead,
@@ -76,7 +80,7 @@ def occluded(sa, p, ng, q, stack):
     o, d, tmax = shadow_ray(p, ng, q)
     if tmax <= 0.0:
         return False
-    return any_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack,
+    return any_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack,
                    False, sa.materials) >= 0
 
 

@@ -8,7 +8,7 @@ Russian roulette from ``rr_depth`` on with Mitsuba's survival probability
 ignores them too); :mod:`gdlearn.kernels.volume_path` is the ``volpath`` counterpart.
 
 Random numbers (the layout random-sequence replay depends on, book chapter "replay"):
-``rand(seed, key, sample, dim)`` with the pixel's key and
+``rand_at(h, dim)`` with the pixel's key and
 
 * dims 0, 1: the film position inside the pixel (drawn by the caller),
 * bounce b uses dims ``2 + b * DIMS_PER_BOUNCE + k`` with k =
@@ -17,6 +17,12 @@ Random numbers (the layout random-sequence replay depends on, book chapter "repl
 
 The radiance function receives the key *separately* from the film position, so an offset path can
 replay the base path's numbers at a neighbouring pixel.
+
+Speed (benchmarks/README.md, "pt speed"): the kernels here are compiled without reference counting
+(numba's ``_nrt=False``): they only read the scene's arrays, which their caller keeps alive, and
+never allocate, while every array view (a material row) would otherwise cost two calls to numba's
+non-inlinable atomic reference-count functions per bounce. ``forceinline`` lets LLVM inline the
+next-event estimator into the bounce loop (a call passes the scene's arrays as ~100 scalars).
 """
 import math
 
@@ -24,12 +30,12 @@ from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
-from .bvh import closest_hit
+from .bvh import closest_hit_inline
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from .lights import emitter_pdf, eval_emitter, sample_emitter
 from .pathclass import pc_class, pc_init, pc_push, pc_reachable
-from .rng import rand
+from .rng import path_state, rand_at
 from .sampling import power_heuristic
 from .scene_query import occluded
 from .vec import coordinate_system, max3, to_local, to_world
@@ -39,14 +45,14 @@ D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_C
 
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def dim(bounce, k):
     """The RNG dimension of quantity k at bounce b (see the module docstring)."""
     return 2 + bounce * DIMS_PER_BOUNCE + k
 
 
-@njit(cache=True, error_model="numpy")
-def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, want_coat=True, want_rest=True):
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, want_rest=True):
     """Emitter sampling at a surface vertex, MIS-weighted against BSDF sampling: rgb (no throughput).
 
     ``want_coat`` / ``want_rest``: which of the vertex's :func:`bsdf.nee_classes` the effects mask
@@ -54,8 +60,8 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, 
     s, t, n = ns_frame
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
-        rand(seed, key, sample, dim(bounce, D_EM_SEL)), rand(seed, key, sample, dim(bounce, D_EM_U1)),
-        rand(seed, key, sample, dim(bounce, D_EM_U2)))
+        rand_at(h, dim(bounce, D_EM_SEL)), rand_at(h, dim(bounce, D_EM_U1)),
+        rand_at(h, dim(bounce, D_EM_U2)))
     if em < 0:
         return (0.0, 0.0, 0.0)
     wo = to_local(dl, s, t, n)
@@ -69,14 +75,23 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, seed, key, sample, bounce, stack, 
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def _wanted(mask, state):
     """Does the effects mask ask for the class of a path ending at a light after ``state``?"""
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """Radiance along the camera ray (o, d) (Mitsuba ``path``): :func:`radiance_path_inline` as a
+    function of its own, for callers that trace a path here and there (the gradient kernels)."""
+    return radiance_path_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack)
+
+
+# forceinline: the path tracer's pixel loop inlines the whole path (a call passes the scene's arrays
+# as ~100 scalars, ~9% of a Cornell-box sample)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+def radiance_path_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``path``). Returns rgb.
 
     ``mask``: effect-class bits to keep (``pathclass.ALL_MASK`` for the full image); the class of
@@ -85,6 +100,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
     A null BSDF passes the ray on; as in Mitsuba's ``path`` it still counts towards max_depth, but
     it is not a vertex of the path's class.
     """
+    h = path_state(seed, key, sample)      # hashed once: each number is then one finaliser
     L0 = 0.0
     L1 = 0.0
     L2 = 0.0
@@ -96,7 +112,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
     state = pc_init()
     depth = 0
     while True:
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if prim < 0:
             if sa.env >= 0 and _wanted(mask, state):       # escaped: the constant emitter
@@ -125,13 +141,13 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         want_coat = _wanted(mask, pc_push(state, c_coat))
         want_rest = _wanted(mask, pc_push(state, c_rest))
         if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
-            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, seed, key, sample, depth, stack, want_coat, want_rest)
+            c = nee_surface(sa, p, ng, (s, tt, ns), wi, mat, h, depth, stack, want_coat, want_rest)
             L0 += beta[0] * c[0]
             L1 += beta[1] * c[1]
             L2 += beta[2] * c[2]
-        u_lobe = rand(seed, key, sample, dim(depth, D_LOBE))
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand(seed, key, sample, dim(depth, D_BSDF_U1)),
-                                               rand(seed, key, sample, dim(depth, D_BSDF_U2)))
+        u_lobe = rand_at(h, dim(depth, D_LOBE))
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, dim(depth, D_BSDF_U1)),
+                                               rand_at(h, dim(depth, D_BSDF_U2)))
         if not pdf > 0.0:
             break
         beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
@@ -149,7 +165,7 @@ def radiance_path(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, 
         bmax = max3(beta)
         if depth >= rr_depth:
             q = min(bmax * eta * eta, 0.95)
-            if rand(seed, key, sample, dim(depth - 1, D_RR)) >= q:
+            if rand_at(h, dim(depth - 1, D_RR)) >= q:
                 break
             beta = (beta[0] / q, beta[1] / q, beta[2] / q)
         if not bmax > 0.0:

@@ -9,54 +9,54 @@ import math
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def add(a, b):
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def sub(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def mul(a, b):
     """Component-wise product (colours)."""
     return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def scale(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def fma(a, s, b):
     """a * s + b (a ray point: origin + t * direction)."""
     return (a[0] * s + b[0], a[1] * s + b[1], a[2] * s + b[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def neg(a):
     return (-a[0], -a[1], -a[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def norm(a):
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def normalize(a):
     n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     if n == 0.0:
@@ -65,17 +65,17 @@ def normalize(a):
     return (a[0] * inv, a[1] * inv, a[2] * inv)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def max3(a):
     return max(a[0], max(a[1], a[2]))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def mean3(a):
     return (a[0] + a[1] + a[2]) * (1.0 / 3.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def coordinate_system(n):
     """An orthonormal basis (s, t) completing the unit vector n (Duff et al. 2017, branchless)."""
     sign = math.copysign(1.0, n[2])
@@ -86,13 +86,13 @@ def coordinate_system(n):
     return s, t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def to_local(v, s, t, n):
     """World -> local shading frame (n is the z axis)."""
     return (dot(v, s), dot(v, t), dot(v, n))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def to_world(v, s, t, n):
     """Local shading frame -> world."""
     return (s[0] * v[0] + t[0] * v[1] + n[0] * v[2],

@@ -22,6 +22,9 @@ Rules taken from volpath (they change the image, so they follow Mitsuba exactly)
 
 Random numbers: the layout of :mod:`gdlearn.kernels.surface_path`, indexed by the *segment* number
 (every loop iteration, null crossings included, takes a fresh block of ``DIMS_PER_BOUNCE``).
+
+Compiled without reference counting and with the next-event estimator inlined, for the reasons given
+in :mod:`gdlearn.kernels.surface_path`.
 """
 import math
 
@@ -29,7 +32,7 @@ from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
-from .bvh import closest_hit
+from .bvh import closest_hit, closest_hit_inline
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
 from .layout import MAT_TYPE, NULL, V_MEDIUM
@@ -37,7 +40,7 @@ from .lights import emitter_pdf, eval_emitter, sample_emitter
 from .medium import medium_params, sample_distance, transmittance
 from .pathclass import pc_init, pc_push, pc_reachable
 from .phase import hg_eval, hg_sample
-from .rng import rand
+from .rng import path_state, rand_at
 from .sampling import power_heuristic
 from .scene_query import SHADOW_EPS
 from .surface_path import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH, D_MED_T, D_RR,
@@ -49,7 +52,7 @@ from .vec import coordinate_system, dot, max3, to_local, to_world
 MAX_SEGMENTS = 4096
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", forceinline=True)
 def roulette(beta, eta, depth, rr_depth, u):
     """Mitsuba's Russian roulette from rr_depth on: survive with q = min(max(beta) eta^2, 0.95) and
     divide by q. Returns (alive, beta)."""
@@ -74,7 +77,7 @@ def next_medium(prim_info, prim, medium, d, ng):
     return prim_info[prim, INFO_MED_EXT]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def shadow_transmittance(sa, p, ng, q, medium, stack):
     """Transmittance from p (surface normal ng, or zeros in a medium) to q, crossing null interfaces
     and the media between them; 0 if any non-null surface blocks the segment."""
@@ -107,16 +110,16 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
     return tr
 
 
-@njit(cache=True, error_model="numpy")
-def nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack):
+@njit(cache=True, error_model="numpy", forceinline=True, _nrt=False)
+def nee_volume(sa, p, ng, prim, medium, h, seg, stack):
     """Emitter sample from p with transmittance: (em, d, weight, pdf, is_delta) with weight =
     Le T / pdf (Mitsuba volpath's ``sample_emitter``); em = -1 when it carries nothing.
     ``prim`` is the surface p lies on (-1 for a medium vertex): the shadow ray starts in the medium
     on the side it leaves towards, as Mitsuba's ``si.target_medium(ds.d)``."""
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
-        rand(seed, key, sample, dim(seg, D_EM_SEL)), rand(seed, key, sample, dim(seg, D_EM_U1)),
-        rand(seed, key, sample, dim(seg, D_EM_U2)))
+        rand_at(h, dim(seg, D_EM_SEL)), rand_at(h, dim(seg, D_EM_U1)),
+        rand_at(h, dim(seg, D_EM_U2)))
     if em < 0:
         return -1, dl, (0.0, 0.0, 0.0), 0.0, delta
     if prim >= 0:
@@ -127,9 +130,18 @@ def nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack):
     return em, dl, (w_em[0] * tr[0], w_em[1] * tr[1], w_em[2] * tr[2]), pdf_em, delta
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
+    """Radiance along the camera ray (o, d) (Mitsuba ``volpath``): :func:`radiance_volpath_inline`
+    as a function of its own (see ``surface_path.radiance_path``)."""
+    return radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack)
+
+
+# forceinline: inlined into the path tracer's pixel loop (see surface_path.radiance_path_inline)
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
+def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mask, threshold, stack):
     """Radiance along the camera ray (o, d) (Mitsuba ``volpath``; see the module docstring)."""
+    h = path_state(seed, key, sample)      # hashed once: each number is then one finaliser
     L = (0.0, 0.0, 0.0)
     beta = (1.0, 1.0, 1.0)
     eta = 1.0
@@ -140,12 +152,12 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
     state = pc_init()
     depth = 0
     for seg in range(MAX_SEGMENTS):
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if medium >= 0:
             sig, alb, g = medium_params(sa.media[medium])
-            ts, scattered, w = sample_distance(sig, alb, t, rand(seed, key, sample, dim(seg, D_MED_CH)),
-                                               rand(seed, key, sample, dim(seg, D_MED_T)))
+            ts, scattered, w = sample_distance(sig, alb, t, rand_at(h, dim(seg, D_MED_CH)),
+                                               rand_at(h, dim(seg, D_MED_T)))
             beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
             if scattered:
                 depth += 1
@@ -155,7 +167,7 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
                 wi = (-d[0], -d[1], -d[2])
                 state = pc_push(state, V_MEDIUM)
                 if _wanted(mask, state):
-                    em, dl, wl, pdf_em, delta = nee_volume(sa, p, (0.0, 0.0, 0.0), -1, medium, seed, key, sample,
+                    em, dl, wl, pdf_em, delta = nee_volume(sa, p, (0.0, 0.0, 0.0), -1, medium, h,
                                                            seg, stack)
                     if em >= 0:
                         ph = hg_eval(g, dot(wi, dl))
@@ -164,15 +176,15 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
                         L = (L[0] + beta[0] * wl[0] * k, L[1] + beta[1] * wl[1] * k, L[2] + beta[2] * wl[2] * k)
                 if not pc_reachable(state, mask):
                     break
-                d, pdf = hg_sample(g, wi, rand(seed, key, sample, dim(seg, D_BSDF_U1)),
-                                   rand(seed, key, sample, dim(seg, D_BSDF_U2)))
+                d, pdf = hg_sample(g, wi, rand_at(h, dim(seg, D_BSDF_U1)),
+                                   rand_at(h, dim(seg, D_BSDF_U2)))
                 if not pdf > 0.0:
                     break
                 o = p
                 prev_p = p
                 prev_pdf = pdf
                 prev_delta = False
-                alive, beta = roulette(beta, eta, depth, rr_depth, rand(seed, key, sample, dim(seg, D_RR)))
+                alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(seg, D_RR)))
                 if not alive:
                     break
                 continue
@@ -202,7 +214,7 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
         want_coat = _wanted(mask, pc_push(state, c_coat))
         want_rest = _wanted(mask, pc_push(state, c_rest))
         if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
-            em2, dl, wl, pdf_em, delta = nee_volume(sa, p, ng, prim, medium, seed, key, sample, seg, stack)
+            em2, dl, wl, pdf_em, delta = nee_volume(sa, p, ng, prim, medium, h, seg, stack)
             if em2 >= 0:
                 wo = to_local(dl, s, tt, ns)
                 f = bsdf_eval(mat, wi, wo)
@@ -210,9 +222,9 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
                 k *= nee_class_share(mat, wi, wo, want_coat, want_rest)   # a rough plastic's split
                 L = (L[0] + beta[0] * f[0] * wl[0] * k, L[1] + beta[1] * f[1] * wl[1] * k,
                      L[2] + beta[2] * f[2] * wl[2] * k)
-        u_lobe = rand(seed, key, sample, dim(seg, D_LOBE))
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand(seed, key, sample, dim(seg, D_BSDF_U1)),
-                                               rand(seed, key, sample, dim(seg, D_BSDF_U2)))
+        u_lobe = rand_at(h, dim(seg, D_LOBE))
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, dim(seg, D_BSDF_U1)),
+                                               rand_at(h, dim(seg, D_BSDF_U2)))
         if not pdf > 0.0:
             break
         beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
@@ -227,7 +239,7 @@ def radiance_volpath(sa, o, d, tmax, seed, key, sample, max_depth, rr_depth, mas
         prev_pdf = pdf
         prev_delta = is_delta
         depth += 1
-        alive, beta = roulette(beta, eta, depth, rr_depth, rand(seed, key, sample, dim(seg, D_RR)))
+        alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(seg, D_RR)))
         if not alive:
             break
     return L

@@ -9,7 +9,7 @@ field            dtype / shape                meaning
 prims            f64 (N, PRIM_WIDTH)          primitive rows (kernels/geometry.py), BVH order
 prim_info        i32 (N, INFO_WIDTH)          type, material, emitter, media, shape index
 prim_area        f64 (N,)                     surface area of each primitive
-nodes, node_info f64 (M, 6), i32 (M, 3)       BVH (kernels/bvh.py)
+nodes, node_info f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/bvh.py)
 materials        f64 (B, MAT_WIDTH)           BSDF rows (kernels/layout.py, bsdf.material_row)
 media            f64 (K, MED_WIDTH)           homogeneous media (sigma_t, albedo, g)
 emitters         f64 (E, EM_WIDTH)            emitter rows (kernels/lights.py)
@@ -330,7 +330,7 @@ def compile_scene(scene: Scene, plan=None) -> SceneArrays:
         rows.append(r), info.append(inf), areas.append(a), lo.append(l), hi.append(h)
     rows, info, areas = np.concatenate(rows), np.concatenate(info), np.concatenate(areas)
     lo, hi = np.concatenate(lo), np.concatenate(hi)
-    nodes, node_info, order = _bvh.build(lo, hi)
+    order, nodes, node_info = _bvh.build_scene(rows, info[:, g.INFO_TYPE], info[:, g.INFO_SHAPE], lo, hi)
     rows, info, areas = rows[order], info[order], areas[order]
     bmin, bmax = lo.min(0), hi.max(0)
     bs = np.concatenate([(bmin + bmax) / 2, [np.linalg.norm(bmax - bmin) / 2]])
