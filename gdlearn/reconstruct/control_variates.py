@@ -20,18 +20,24 @@ uniform -- the self term is trusted more; they are uniform when the gradient var
 
 Variances from two half-buffers (``halves=``) are pooled over each pixel's 3 x 3 window
 (``variance_pool=1``, :func:`gdlearn.reconstruct.conventions.variances_from_halves`): each estimate
-becomes the larger of itself and its window's mean. The per-pixel estimate (A - B)^2 / 4 has one
-degree of freedom: in a pixel whose two halves happen to agree it is near zero, Eq. 21 then trusts
-that pixel's identities almost alone, and the early snapshots of a progressive render can end up
-worse than the primal image. The window's mean is far steadier; taking the maximum with the
-pixel's own estimate keeps an isolated noisy pixel (a firefly, a pixel on the light's edge) from
-being averaged into trust -- with the plain mean, 64-spp Cornell boxes came out worse than with
-no pooling. Measured (gpt-replay, 48^2, 4 seeds, relMSE against a 2048-spp pt reference,
-2026-12-01), per-pixel -> plain mean -> max(own, mean): Cornell box 4 spp 0.124 -> 0.048 -> 0.039,
-64 spp 1.8e-2 -> 4.2e-3 -> 4.2e-3 (primal 1.2e-2); fog box 4 spp 0.36 -> 0.096 -> 0.083, 64 spp
-7.6e-3 -> 9.1e-3 -> 8.4e-3 (primal 5.0e-2); caustics box 16 spp 0.118 -> 0.103 -> 0.093, 64 spp
-3.3e-2 -> 3.5e-2 -> 3.0e-2 (primal 0.10). A 5 x 5 window (r = 2, plain mean) was worse than 3 x 3
-everywhere measured. Explicit ``variances=`` are used as given.
+becomes the larger of itself and its window's median (primal) or mean (gradients). The per-pixel
+estimate (A - B)^2 / 4 has one degree of freedom: in a pixel whose two halves happen to agree it is
+near zero, Eq. 21 then trusts that pixel's identities almost alone, and the early snapshots of a
+progressive render can end up worse than the primal image. A window is far steadier; the maximum
+with the pixel's own estimate keeps an isolated noisy pixel (a firefly, the light's edge) from
+being averaged into trust; and the primal's window takes the median because a pixel's variance
+jumps with the image at a light's rim -- a mean there lends the dark pixels beside a light the
+light's variance, weights them nearly uniformly and spreads the light's noise (the accuracy
+chapter's toy image: relMSE 4.2e-3 with means everywhere, *worse* than the primal's 3.7e-3; 4.5e-5
+with the median). Measured (2026-12-01, relMSE against an exact image or a 2048-spp pt reference,
+mean over seeds), per-pixel -> means everywhere -> median for the primal, means for the gradients:
+toy image 96 x 64, 6 seeds, 16 spp 1.0e-2 -> 7.6e-2 -> 6.7e-4, 256 spp 1.1e-4 -> 4.2e-3 -> 4.5e-5;
+gpt-replay at 48^2, 4 seeds: Cornell box 4 spp 0.124 -> 0.039 -> 0.031, 16 spp 2.5e-2 -> 1.3e-2 ->
+7.7e-3, 64 spp 1.8e-2 -> 4.2e-3 -> 2.2e-3 (primal 1.2e-2); fog box 4 spp 0.36 -> 0.083 -> 0.055,
+64 spp 7.6e-3 -> 8.4e-3 -> 6.0e-3 (primal 5.0e-2); caustics box 16 spp 0.118 -> 0.093 -> 0.072,
+64 spp 3.3e-2 -> 3.0e-2 -> 2.5e-2 (primal 0.10). Medians everywhere lost at 4 spp (Cornell 0.11,
+caustics 0.58); a 5 x 5 window (plain means) was worse than 3 x 3 everywhere measured.
+Explicit ``variances=`` are used as given.
 
 Boundaries and missing data: a pixel averages only the identities that exist -- neighbours inside
 the image whose gradient is finite, itself if its primal is finite (the reference implementation

@@ -23,7 +23,7 @@ from numba import prange
 from ._jit import kernel
 
 __all__ = ["Reconstruction", "Problem", "prepare", "forward_differences", "variances_from_halves",
-           "pool_variance", "expand_like"]
+           "pool_variance", "POOL_STATISTIC", "expand_like"]
 
 
 @dataclass
@@ -186,6 +186,16 @@ def forward_differences(image) -> tuple[np.ndarray, np.ndarray]:
     return gx, gy
 
 
+#: The statistic each buffer's variance estimates are pooled with (``variances_from_halves``).
+#: A pixel's variance follows the image itself -- next to a light it jumps by orders of magnitude
+#: from one pixel to the next -- so a window *mean* would lend a dark pixel the variance of its
+#: bright neighbour, make it distrust its own identity and pull the light's noise in; the *median*
+#: ignores such a minority. The gradients' windows average (a mean over all nine pairs), which also
+#: lends the pairs beside a light's rim some of the rim's variance -- measured better than the
+#: median there (module docstring of :mod:`gdlearn.reconstruct.control_variates`).
+POOL_STATISTIC = {"primal": "median", "gx": "mean", "gy": "mean"}
+
+
 def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     """Per-pixel variances of the full means from two independent half-buffers.
 
@@ -195,11 +205,12 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     estimate as ``gdlearn.integrators.base.Frame.variance`` and the two-buffer approach the STAR
     describes for photon mapping (Hua et al. 2019, Sec. 5.2).
 
-    ``pool = r > 0`` replaces each estimate by the larger of itself and its mean over the
-    (2r + 1)^2 window around the pixel (:func:`pool_variance`). The mean has about (2r + 1)^2
-    degrees of freedom instead of one, so a pixel whose two halves happen to agree is no longer
-    trusted blindly; keeping the pixel's own estimate where it is larger stops the mean from
-    diluting an isolated high-variance pixel (a firefly, the edge of a light) into trust. The
+    ``pool = r > 0`` replaces each estimate by the larger of itself and a statistic of the
+    estimates in the (2r + 1)^2 window around the pixel (:func:`pool_variance`; the statistic per
+    buffer is :data:`POOL_STATISTIC`, ``"mean"`` for names not listed there). The window has about
+    (2r + 1)^2 degrees of freedom instead of one, so a pixel whose two halves happen to agree is no
+    longer trusted blindly; keeping the pixel's own estimate where it is larger stops the window
+    from diluting an isolated high-variance pixel (a firefly, the edge of a light) into trust. The
     weighted control variates use r = 1 (measurements there).
     """
     if int(pool) != pool or pool < 0:
@@ -211,15 +222,25 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
             raise ValueError(f"halves[{name!r}]: the two halves have shapes {a.shape} and "
                              f"{b.shape}; they must match")
         v = 0.25 * (a - b) ** 2
-        out[name] = np.fmax(v, pool_variance(v, int(pool))) if pool else v   # fmax: NaN stays out
+        if pool:                                    # fmax: a missing (NaN) estimate stays missing
+            v = np.fmax(v, pool_variance(v, int(pool), POOL_STATISTIC.get(name, "mean")))
+        out[name] = v
     return out
 
 
-def pool_variance(v: np.ndarray, r: int) -> np.ndarray:
-    """Mean of the variance estimates ``v`` (H x W or H x W x C) over the (2r+1) x (2r+1) window of
-    every pixel, clipped at the image border. Non-finite entries (missing data) are left out of every
-    window and stay as they are, so one NaN never spreads and a missing pixel stays missing."""
+def pool_variance(v: np.ndarray, r: int, statistic: str = "mean") -> np.ndarray:
+    """Mean (or median) of the variance estimates ``v`` (H x W or H x W x C) over the
+    (2r+1) x (2r+1) window of every pixel, clipped at the image border. Non-finite entries (missing
+    data) are left out of every window and stay as they are, so one NaN never spreads and a missing
+    pixel stays missing. The median of an even number of values is the mean of the middle two."""
     v = np.asarray(v, dtype=np.float64)
+    if statistic == "median":
+        v3 = v.reshape(v.shape[0], v.shape[1], -1)
+        out = np.empty_like(v3)
+        _window_median(v3, int(r), out)
+        return out.reshape(v.shape)
+    if statistic != "mean":
+        raise ValueError(f"statistic = {statistic!r}: use 'mean' or 'median'")
     ok = np.isfinite(v)
     val = np.where(ok, v, 0.0)
     pad = [(r, r), (r, r)] + [(0, 0)] * (v.ndim - 2)
@@ -233,3 +254,29 @@ def pool_variance(v: np.ndarray, r: int) -> np.ndarray:
             s += vp[dy:dy + h, dx:dx + w]
             n += cp[dy:dy + h, dx:dx + w]
     return np.where(ok, s / np.maximum(n, 1.0), v)
+
+
+@kernel
+def _window_median(v, r, out):
+    """out[y, x, k] = median of the finite v in the window of (y, x), channel k (see pool_variance);
+    an insertion sort of at most (2r + 1)^2 values per pixel."""
+    h, w, c = v.shape
+    for y in prange(h):
+        buf = np.empty((2 * r + 1) ** 2)
+        for x in range(w):
+            for k in range(c):
+                if not np.isfinite(v[y, x, k]):
+                    out[y, x, k] = v[y, x, k]
+                    continue
+                n = 0
+                for yy in range(max(y - r, 0), min(y + r + 1, h)):
+                    for xx in range(max(x - r, 0), min(x + r + 1, w)):
+                        e = v[yy, xx, k]
+                        if np.isfinite(e):
+                            i = n
+                            while i > 0 and buf[i - 1] > e:
+                                buf[i] = buf[i - 1]
+                                i -= 1
+                            buf[i] = e
+                            n += 1
+                out[y, x, k] = buf[n // 2] if n % 2 else 0.5 * (buf[n // 2 - 1] + buf[n // 2])
