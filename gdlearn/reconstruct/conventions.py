@@ -192,7 +192,7 @@ def forward_differences(image) -> tuple[np.ndarray, np.ndarray]:
 #: bright neighbour, make it distrust its own identity and pull the light's noise in; the *median*
 #: ignores such a minority. The gradients' windows average (a mean over all nine pairs), which also
 #: lends the pairs beside a light's rim some of the rim's variance -- measured better than the
-#: median there (module docstring of :mod:`gdlearn.reconstruct.control_variates`).
+#: median there (:mod:`gdlearn.reconstruct.cv_weights`).
 POOL_STATISTIC = {"primal": "median", "gx": "mean", "gy": "mean"}
 
 
@@ -211,7 +211,7 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     (2r + 1)^2 degrees of freedom instead of one, so a pixel whose two halves happen to agree is no
     longer trusted blindly; keeping the pixel's own estimate where it is larger stops the window
     from diluting an isolated high-variance pixel (a firefly, the edge of a light) into trust. The
-    weighted control variates use r = 1 (measurements there).
+    weighted control variates use r = 1 (measurements in :mod:`gdlearn.reconstruct.cv_weights`).
     """
     if int(pool) != pool or pool < 0:
         raise ValueError(f"pool = {pool!r} must be an integer >= 0 (0: per pixel, 1: 3 x 3 window)")
