@@ -20,7 +20,8 @@ Rows:
 * weighted L2 (Jacobi-scaled DCT-preconditioned CG) vs scipy ``cg`` on the same weighted system;
 * L1 IRLS with the defaults (multigrid-preconditioned float32 corrections) and with a budget
   setting (6 reweightings x 2 CG steps);
-* control variates, uniform and weighted, 50 iterations.
+* control variates, uniform and weighted (given variances, or estimated from half-buffers and
+  pooled), 50 iterations.
 Then, at ``--quality-size``, the L1 energy reached by the defaults against an emulation of the
 reference solver's L1D preset (20 reweightings x 50 plain-CG steps, no preconditioner) and
 against the DCT-preconditioned path (the default before the multigrid one).
@@ -196,6 +197,8 @@ def main():
     img, p, gx, gy = test_data(h, w)
     rng = np.random.default_rng(1)
     wts = tuple(np.exp(rng.uniform(-1.2, 1.2, (h, w, 1))) * np.ones((h, w, 3)) for _ in range(3))
+    halves = {n: (v + d, v - d) for n, v in (("primal", p), ("gx", gx), ("gy", gy))
+              for d in [0.2 * rng.standard_normal(v.shape)]}
 
     calls = {
         "exact L2 (DCT)": lambda: poisson_l2(p, gx, gy),
@@ -208,6 +211,9 @@ def main():
         "control variates, weighted, 50 it.": lambda: control_variates(
             p, gx, gy, 50, variances={"primal": np.full(p.shape, 0.04), "gx": 1 / wts[1],
                                       "gy": 1 / wts[2]}),
+        # what gpt frames use: variances estimated from two half-buffers, pooled 3 x 3 (cv_weights)
+        "control variates, weighted from halves": lambda: control_variates(p, gx, gy, 50,
+                                                                           halves=halves),
     }
     targets = {"exact L2 (DCT)": 0.2, "L1 IRLS, defaults": 1.0,
                "control variates, uniform, 50 it.": 0.5}
