@@ -92,7 +92,8 @@ def pass_probability(sigma_t, t_max):
     return (_tr1(sigma_t[0], t_max) + _tr1(sigma_t[1], t_max) + _tr1(sigma_t[2], t_max)) / 3.0
 
 
-@njit(cache=True)
+# forceinline: called on every segment of a volume path (a call costs more than the grey case)
+@njit(cache=True, forceinline=True)
 def sample_distance(sigma_t, albedo, t_max, u_channel, u):
     """Free-flight sampling in an RGB homogeneous medium with spectral MIS (module doc).
 

@@ -37,7 +37,7 @@ def hg_eval(g, cos_theta):
     return INV_FOUR_PI * (1.0 - g * g) / (temp * math.sqrt(temp))
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def hg_sample_cos(g, u):
     """The cosine between -wi and wo (1 = straight on) drawn from HG by inversion.
 
@@ -51,7 +51,8 @@ def hg_sample_cos(g, u):
     return min(1.0, max(-1.0, c))
 
 
-@njit(cache=True)
+# forceinline (with hg_sample_cos): called at every medium scattering vertex
+@njit(cache=True, forceinline=True)
 def hg_sample(g, wi, u1, u2):
     """Sample wo around -wi: returns (wo, pdf) with pdf = hg_eval(g, dot(wi, wo)) (weight 1).
     wi must be a unit vector (any frame: world space is fine). u1 gives the cosine by inversion
