@@ -158,3 +158,17 @@ def test_unbounded_segment():
     np.testing.assert_allclose(w[~sc], np.tile([0.0, 3.0, 0.0], ((~sc).sum(), 1)))
     t, sc, w = _rgb_many((1.0, 1.0, 1.0), (0.5, 0.5, 0.5), math.inf, u)
     assert sc.all()
+
+
+def test_neg_log1m_matches_log1p():
+    """The free-flight inversion's -log(1 - u): within an ulp of -log1p(-u) on the renderer's grid
+    k 2^-53 (tiny, middle and near-1 values), and exact for off-grid thin-medium values (the log1p
+    fallback: log(1 - 1e-20) would be 0)."""
+    k = np.concatenate([np.arange(1, 1000), np.random.default_rng(6).integers(0, 2**53, 20000),
+                        2**53 - np.arange(1, 1000)])
+    for u in k.astype(np.float64) * 2.0**-53:
+        ref = -math.log1p(-u)
+        assert abs(M.neg_log1m(u) - ref) <= 2.3e-16 * ref
+    for u in (1e-20, 3e-17, 1e-300):
+        assert M.neg_log1m(u) == -math.log1p(-u)
+    assert math.copysign(1.0, M.neg_log1m(0.0)) == 1.0

@@ -150,6 +150,20 @@ def test_sincos_quarter_matches_libm_to_an_ulp_or_two():
         assert abs(c - math.cos(x)) <= 2.5e-16 * math.cos(x)
 
 
+def test_uniform_unit_circle_is_the_shifted_angle():
+    """(cos, sin) of phi = 2 pi u - pi/4 to ~1 ulp of the unit circle's coordinates, every quadrant
+    and its boundaries included (the quadrant is chosen by arithmetic signs: a wrong sign or swap
+    would be off by O(1))."""
+    u = np.concatenate([np.random.default_rng(10).random(20000), [0.0, 0.25, 0.5, 0.75, 1 - 2**-53],
+                        np.nextafter([0.25, 0.5, 0.75], 0.0)])
+    for x in u:
+        c, s = S.uniform_unit_circle(x)
+        phi = 2 * math.pi * x - math.pi / 4
+        # 2e-15: the reference's own rounding of phi (|phi| < 6, ulp 9e-16) dominates
+        assert abs(c - math.cos(phi)) <= 2e-15 and abs(s - math.sin(phi)) <= 2e-15
+        assert abs(math.hypot(c, s) - 1.0) <= 4.5e-16
+
+
 def test_concentric_disk_is_mitsubas_formula():
     """The same (u1, u2) gives Mitsuba's point (warp.h, written here with libm's sin and cos)."""
     for u1, u2 in np.random.default_rng(9).random((5000, 2)):

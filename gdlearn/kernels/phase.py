@@ -19,6 +19,7 @@ import math
 
 from numba import njit
 
+from gdlearn.kernels.sampling import uniform_unit_circle
 from gdlearn.kernels.vec import coordinate_system
 
 INV_FOUR_PI = 0.25 / math.pi
@@ -36,7 +37,7 @@ def hg_eval(g, cos_theta):
     return INV_FOUR_PI * (1.0 - g * g) / (temp * math.sqrt(temp))
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def hg_sample_cos(g, u):
     """The cosine between -wi and wo (1 = straight on) drawn from HG by inversion.
 
@@ -50,16 +51,18 @@ def hg_sample_cos(g, u):
     return min(1.0, max(-1.0, c))
 
 
-@njit(cache=True)
+# forceinline (with hg_sample_cos): called at every medium scattering vertex
+@njit(cache=True, forceinline=True)
 def hg_sample(g, wi, u1, u2):
     """Sample wo around -wi: returns (wo, pdf) with pdf = hg_eval(g, dot(wi, wo)) (weight 1).
-    wi must be a unit vector (any frame: world space is fine)."""
+    wi must be a unit vector (any frame: world space is fine). u1 gives the cosine by inversion
+    (:func:`hg_sample_cos`), u2 the azimuth (uniform: HG is rotationally symmetric about -wi)."""
     cos_t = hg_sample_cos(g, u1)
     sin_t = math.sqrt(max(0.0, (1.0 - cos_t) * (1.0 + cos_t)))
-    phi = 2.0 * math.pi * u2
+    cphi, sphi = uniform_unit_circle(u2)    # polynomials, not libm's sincos (benchmarks/README)
     fwd = (-wi[0], -wi[1], -wi[2])
     s, t = coordinate_system(fwd)
-    a, b = sin_t * math.cos(phi), sin_t * math.sin(phi)
+    a, b = sin_t * cphi, sin_t * sphi
     wo = (s[0] * a + t[0] * b + fwd[0] * cos_t,
           s[1] * a + t[1] * b + fwd[1] * cos_t,
           s[2] * a + t[2] * b + fwd[2] * cos_t)

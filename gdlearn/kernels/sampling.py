@@ -37,6 +37,24 @@ def sincos_quarter(a):
 
 
 @njit(cache=True, forceinline=True)
+def uniform_unit_circle(u):
+    """(cos phi, sin phi) for the uniform angle phi = 2 pi u - pi/4, without libm's sincos.
+
+    u picks the quadrant q = floor(4u) and an angle a = (pi/2)(4u - q - 1/2) in [-pi/4, pi/4) inside
+    it, so phi = q pi/2 + a: :func:`sincos_quarter` gives (cos a, sin a), a rotation by q quarter
+    turns (a swap and two signs, by arithmetic, not branches: q is a coin toss per sample) the rest.
+    The pi/4 offset against 2 pi u is a fixed rotation of the tangent frame: phi stays uniform."""
+    q = min(int(4.0 * u), 3)
+    s, c = sincos_quarter((0.5 * math.pi) * ((4.0 * u - q) - 0.5))
+    odd = q & 1
+    sx = float(1 - 2 * (((q + 1) >> 1) & 1))    # cos phi < 0 in quadrants 1, 2
+    sy = float(1 - 2 * (q >> 1))                # sin phi < 0 in quadrants 2, 3
+    x = s if odd else c
+    y = c if odd else s
+    return sx * x, sy * y
+
+
+@njit(cache=True, forceinline=True)
 def square_to_uniform_disk_concentric(u1, u2):
     """Shirley-Chiu concentric map of the unit square to the unit disk (area-preserving, low
     distortion); Mitsuba's ``warp::square_to_uniform_disk_concentric``. Returns (x, y).

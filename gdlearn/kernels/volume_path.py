@@ -32,7 +32,7 @@ from numba import njit
 
 from .bsdf import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
-from .bvh import closest_hit, closest_hit_inline
+from .bvh import closest_hit_inline
 from .camera import camera_ray
 from .geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
 from .layout import MAT_TYPE, NULL, V_MEDIUM
@@ -91,7 +91,10 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
     remaining = dist * (1.0 - SHADOW_EPS)
     tr = (1.0, 1.0, 1.0)
     for _ in range(MAX_SEGMENTS):
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining, stack)
+        # the traversal inlined: one call per shadow ray (this function) instead of two, each
+        # passing the scene's arrays as dozens of scalars (benchmarks/README, pt speed)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining,
+                                           stack)
         seg = remaining if prim < 0 else t
         if medium >= 0:
             sig = sa.media[medium]
