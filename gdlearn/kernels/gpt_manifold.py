@@ -77,7 +77,7 @@ def manifold_table(scene, sa) -> np.ndarray:
     return tab
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def lookahead_chain(sa, mtab, hit, prim, p, ng, ns, d, seed, key, s, depth, threshold, cf, ci, stack):
     """Trace the base's specular chain from its next vertex (hit, prim, p ... reached along d, at loop
     depth ``depth``) with the base's own random numbers. Returns m, the chain length, with the chain
@@ -117,7 +117,7 @@ def lookahead_chain(sa, mtab, hit, prim, p, ng, ns, d, seed, key, s, depth, thre
     return 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _segment_reaches(sa, a, ng_a, b, stack):
     """The first hit of the ray from a (normal ng_a) towards b is b itself: ``(ok, prim, ng, ns, dir)``."""
     dv = sub(b, a)
@@ -131,7 +131,7 @@ def _segment_reaches(sa, a, ng_a, b, stack):
     return True, prim, ng, ns, dr
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _solid_angle_factor(x, x1, n1):
     """|cos theta_1| / d^2 of the segment x -> x1 (area -> solid angle at x, Veach Eq. 8.10)."""
     dv = sub(x1, x)
@@ -220,7 +220,7 @@ def manifold_offset(sa, mtab, k, of, oi, m, cf, ci, x_b, mat_b_o, pdf_b, thresho
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _same_row(mtab, a, b):
     """Two primitives of one analytic shape (their manifold rows are equal)."""
     for c in range(M.SH_WIDTH):
@@ -229,7 +229,7 @@ def _same_row(mtab, a, b):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def same_shape(sa, prim_a, prim_b):
     """Both primitives come from the same scene shape (``INFO_SHAPE``)."""
     return sa.prim_info[prim_a, G.INFO_SHAPE] == sa.prim_info[prim_b, G.INFO_SHAPE]

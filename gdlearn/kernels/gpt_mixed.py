@@ -61,7 +61,7 @@ from gdlearn.shifts.reconnection import reconnect
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, threshold, broken):
     """Random replay at offset vertex k (Sec. 3.1): the base's numbers through the offset's own BSDF,
     any lobe (delta or not, whatever the base's was). beta' *= f'/p' (= f' J / p_b with J = p_b / p');
@@ -77,7 +77,7 @@ def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, threshold, broken):
     return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, threshold), pdf, dl
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def inverse_reconnects(sa, lobe_y, cls_x, y_b, x_b, ng_x, hit_y2, prim_y2, y2, ng_y2, threshold, stack):
     """Would the backward shift -- base y (the offset), offset x (the base) -- reconnect x_b to y's next
     vertex y2? C(y_b, x_b, y2) of the module docstring: y's direction at y_b of a connectable lobe
@@ -91,21 +91,21 @@ def inverse_reconnects(sa, lobe_y, cls_x, y_b, x_b, ng_x, hit_y2, prim_y2, y2, n
     return ok and not occluded(sa, x_b, ng_x, y2, stack)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def unpaired(diff, k, cb):
     """A base technique the offset does not have (density zero): Eq. 17 weight 1, offset 0."""
     for c in range(3):
         diff[k, c] -= cb[c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats):
     set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
     oi[k, I_RECONN] = JOINED
     record(stats, SHIFT_RECONNECT, True)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def shift_segment_mixed(sa, k, of, oi, policy, cls_b, mat_b, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2, p2,
                         ng2, ns2, threshold, broken, stats, stack):
     """Shift offset k's segment leaving its vertex by a mixed policy (module docstring). The base
@@ -155,7 +155,7 @@ def shift_segment_mixed(sa, k, of, oi, policy, cls_b, mat_b, p, ng, ns, wi, wo, 
     _advance(of, oi, k, p_o, pdf_o, delta_o, lcls)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _advance(of, oi, k, p_o, pdf_o, delta_o, lcls):
     """The offset's new previous vertex, direction density and lobe kind (next-event MIS, effects)."""
     set3(of, k, F_PREV_P, p_o)

@@ -68,12 +68,12 @@ from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 ONE3 = (1.0, 1.0, 1.0)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
     """The pixel shift (Eq. 3): each neighbour's camera ray with the base's sub-pixel jitter."""
     for k in range(4):
@@ -95,7 +95,7 @@ def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
         oi[k, I_ALIVE] = ALIVE
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _pair(diff, of, oi, k, co, cb, broken):
     """Eq. 16 with Eq. 17's weight for one technique: ``diff[k] += w (C' - C)`` (-C for a failed
     shift), and the weighted offset contribution ``diff[4 + k] += w C'`` (0 for a failed shift) that
@@ -110,7 +110,7 @@ def _pair(diff, of, oi, k, co, cb, broken):
             diff[k, c] -= cb[c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _emission_pairs(sa, of, oi, diff, cb, mask, broken):
     for k in range(4):
         co = (0.0, 0.0, 0.0)
@@ -124,7 +124,7 @@ def _emission_pairs(sa, of, oi, diff, cb, mask, broken):
         _pair(diff, of, oi, k, co, cb, broken)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, broken, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every offset by
     reconnecting to the same light point (for a constant / directional emitter: the same direction).
@@ -155,7 +155,7 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, mask, threshold, bro
         _pair(diff, of, oi, k, co, cb, broken)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta, us, hit2, prim2, p2, ng2,
                    ns2, d2, threshold, broken, stats, stack):
     """Shift offset k's segment leaving its vertex i (base: wi -> wo, next vertex p2 or escape)."""
@@ -198,7 +198,7 @@ def _shift_segment(sa, k, of, oi, policy, cls_b, cls_next, p, wi, wo, pdf, delta
     oi[k, I_STATE] = pc_push(oi[k, I_STATE], lcls)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _fail_mismatched(sa, mat, oi, stats, threshold, policy):
     """Before the base extends its vertex x_i (next event, next bounce), fail every offset whose x'_i
     is of another kind: escaped (no vertex to continue from), connectable vs not, or delta-only vs
@@ -222,7 +222,7 @@ def _fail_mismatched(sa, mat, oi, stats, threshold, policy):
             oi[k, I_ALIVE] = FAILED
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _roulette(of, oi, beta, eta, u):
     """Mitsuba's survival q = min(max throughput * eta^2, 0.95), the max taken over the base and the
     live offsets; returns q (0: stop). Survivors' throughputs are divided by q by the caller."""
@@ -236,7 +236,7 @@ def _roulette(of, oi, beta, eta, u):
     return q
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, of, oi, diff, mask, threshold,
                 broken, stack):
     """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers) and its
@@ -297,7 +297,7 @@ def _shift_offsets(sa, of, oi, policy, mat, p, ng, ns, wi, wo, weight, pdf, delt
                            delta, us, hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _any_free(oi):
     for k in range(4):
         if oi[k, I_ALIVE] == ALIVE and oi[k, I_RECONN] == FREE and oi[k, I_PENDING] == 0:
@@ -305,7 +305,7 @@ def _any_free(oi):
     return False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def cls_next_of(sa, hit2, prim2, threshold):
     return vclass_of(sa, not hit2, prim2, threshold)
 

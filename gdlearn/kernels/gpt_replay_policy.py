@@ -35,7 +35,7 @@ from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 REPLAY_WEIGHT = 0.5
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _radiance(sa, volume, fx, fy, seed, key, s, max_depth, rr_depth, mask, threshold, stack):
     o, d, tmax = camera_ray(sa.camera, fx, fy)
     if volume:
@@ -43,7 +43,7 @@ def _radiance(sa, volume, fx, fy, seed, key, s, max_depth, rr_depth, mask, thres
     return radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def replay_sample(sa, volume, fx, fy, x, y, w, h, seed, key, s, max_depth, rr_depth, mask, threshold, diff, stats,
                   stack, broken):
     """One base path through film point (fx, fy) of pixel (x, y) and its four replayed offsets (module

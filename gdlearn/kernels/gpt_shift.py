@@ -62,29 +62,29 @@ FREE, JOINED, MERGED = 0, 1, 2
 OUTSIDE, FAILED, ALIVE = -1, 0, 1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def get3(a, k, j):
     return (a[k, j], a[k, j + 1], a[k, j + 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def set3(a, k, j, v):
     a[k, j] = v[0]
     a[k, j + 1] = v[1]
     a[k, j + 2] = v[2]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def mul3(a, b):
     return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def sc3(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
     """Make (p, ng, ns) of primitive prim, reached along d, offset k's current vertex."""
     set3(of, k, F_POS, p)
@@ -96,7 +96,7 @@ def set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
     oi[k, I_MAT] = sa.prim_info[prim, 1] if hit else -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def emitted(sa, escaped, prim, p, ns, d, prev_p, prev_pdf, prev_delta):
     """Le seen along the travel direction d at hit p (or the constant emitter on escape), MIS-weighted
     against next-event estimation from prev_p exactly as ``surface_path.radiance_path`` does."""
@@ -116,7 +116,7 @@ def emitted(sa, escaped, prim, p, ns, d, prev_p, prev_pdf, prev_delta):
     return sc3(le, w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def light_weight(sa, em, q, nq, p):
     """``(Le / pdf_sa, pdf_sa, is_delta, dir p->q)`` of a *fixed* light point q (normal nq) of emitter
     em seen from p: the next-event weight of ``lights.sample_emitter`` re-evaluated at another
@@ -149,7 +149,7 @@ def light_weight(sa, em, q, nq, p):
     return sc3(rgb, 1.0 / sel), sel, True, dl      # directional
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack):
     """Next-event contribution (without throughput) of light point q at a surface vertex p whose path
     arrives from wi_world: f(wi, wo) |cos| Le / pdf, MIS (power heuristic) against BSDF sampling."""
@@ -160,7 +160,7 @@ def nee_at(sa, em, q, nq, p, ng, ns, wi_world, mat, stack):
 VIS_UNKNOWN, VIS_OCCLUDED, VIS_VISIBLE = -1, 0, 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, vis):
     """:func:`nee_at` that reuses a known visibility of the segment p -> q (``vis``, e.g. the base's
     shadow ray for an offset JOINED at the base's own vertex) and returns ``(value, vis)``."""
@@ -181,7 +181,7 @@ def nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, vis):
     return sc3(mul3(f, w_em), w), vis
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def vclass_of(sa, escaped, prim, threshold):
     """The material class of a hit (``bsdf.vertex_class``), ESCAPED for a path that left the scene."""
     if escaped:
@@ -189,12 +189,12 @@ def vclass_of(sa, escaped, prim, threshold):
     return vertex_class(sa.materials[sa.prim_info[prim, 1]], threshold)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def conn(c):
     return c != ESCAPED and connectable(c)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def decide(policy, cls_b, cls_o, cls_next):
     """The action for the segment leaving vertex i (``policy.choose_shift`` with the next base vertex
     known): fail if base and offset disagree on connectability (not invertible, Kettunen et al.
@@ -212,7 +212,7 @@ def decide(policy, cls_b, cls_o, cls_next):
     return SHIFT_HALFVECTOR
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def same_delta_lobe(mat, wi, refl):
     """Sample the offset's delta lobe of the same kind as the base's (reflection if ``refl`` else
     transmission): the half-vector copy at a smooth interface (h = n, Jacobian 1). Returns
@@ -225,7 +225,7 @@ def same_delta_lobe(mat, wi, refl):
     return ZERO3, ZERO3, 0.0, False
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, u_lobe, u1, u2, x_next,
                     ng_next, threshold, broken, stack):
     """Shift the segment leaving offset vertex k by ``action`` (base: local wi_b -> wo_b sampled with
@@ -272,7 +272,7 @@ def shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, u
     return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, False, threshold), pdf, False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _update(of, k, f, j, pdf_o, pdf_b):
     """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0: Eq. 17 then
     gives the base weight 1, as it must for a path the neighbour's tracer never samples)."""
@@ -281,7 +281,7 @@ def _update(of, k, f, j, pdf_o, pdf_b):
     of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def follow_base(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, threshold):
     """Offset k shares the base vertex p: same outgoing direction (J = 1). A JOINED offset arrives
     from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""

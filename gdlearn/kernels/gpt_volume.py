@@ -67,7 +67,7 @@ ONE3 = (1.0, 1.0, 1.0)
 VB_CAMERA, VB_SURFACE, VB_MEDIUM = 0, 1, 2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _flight(sa, of, oi, k, ev_b, tau, lp_b, W, cls_next, delta_next, threshold, broken, stack):
     """Shift the base's flight to offset k's own ray (distance copy / pass) and check that the
     offset's event is of the base's kind (escape, scattering, surface of the same connectability
@@ -91,7 +91,7 @@ def _flight(sa, of, oi, k, ev_b, tau, lp_b, W, cls_next, delta_next, threshold, 
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _shift_free(sa, of, oi, k, policy, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_b, us, ev, prim2, p2, ng2, ns2,
                 med2, cls_next, delta_next, tau, lp_b, W, threshold, broken, stats, stack):
     """Shift the segment x_i -> x_{i+1} of a not yet reconnected offset: direction, then flight."""
@@ -136,7 +136,7 @@ def _shift_free(sa, of, oi, k, policy, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_
     return ok
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _shift_all(sa, of, oi, policy, bv, ev, prim2, p2, ng2, ns2, d, med2, tau, lp_b, W, seg0, seg_b, seed, key, s,
                threshold, broken, stats, stack):
     """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``ev`` at p2). ``bv``: the
@@ -167,7 +167,7 @@ def _shift_all(sa, of, oi, policy, bv, ev, prim2, p2, ng2, ns2, d, med2, tau, lp
     push_medium_vertex(oi)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _emission(sa, escaped, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, summ, mask,
               broken):
     """The emitter-hit technique at the base's surface hit / escape (volpath's arithmetic, so L is
@@ -199,7 +199,7 @@ def _emission(sa, escaped, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, s
     return cb
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _next_event(sa, p, ng, ns, prim, medium, mat, g, medium_vertex, wi_w, beta, state, seed, key, s, seg, of, oi,
                 diff, summ, mask, threshold, broken, stack):
     """volpath's next-event sample at the base vertex (``nee_volume``'s random numbers and arithmetic)
@@ -238,7 +238,7 @@ def _next_event(sa, p, ng, ns, prim, medium, mat, g, medium_vertex, wi_w, beta, 
     return cb
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _roulette_all(of, oi, beta, eta, depth, rr_depth, u):
     """Mitsuba's roulette q = min(max throughput eta^2, 0.95) with the max over the base *and* the
     live offsets (a black base must not stop offsets that still carry light). Returns (alive, beta)."""
@@ -261,7 +261,7 @@ def _roulette_all(of, oi, beta, eta, depth, rr_depth, u):
     return True, (beta[0] / q, beta[1] / q, beta[2] / q)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, policy, max_depth, rr_depth, mask, threshold,
                       of, oi, diff, summ, stats, stack, broken=0):
     """One volpath base path through film point (fx, fy) of pixel (x, y) and its four shifts.

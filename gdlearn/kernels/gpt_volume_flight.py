@@ -47,7 +47,7 @@ ONE3 = (1.0, 1.0, 1.0)
 _LOG3 = math.log(3.0)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _lsum3(a0, a1, a2):
     """log(exp(a0) + exp(a1) + exp(a2)) - log 3 without underflow (-inf entries allowed)."""
     m = max(a0, max(a1, a2))
@@ -56,7 +56,7 @@ def _lsum3(a0, a1, a2):
     return m + math.log(math.exp(a0 - m) + math.exp(a1 - m) + math.exp(a2 - m)) - _LOG3
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _neg_tau(sigma, t):
     """-sigma t, with sigma = 0 giving 0 for any t (also t = inf)."""
     if sigma == 0.0:
@@ -64,13 +64,13 @@ def _neg_tau(sigma, t):
     return -sigma * t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def log_pass_probability(sigma_t, t):
     """log P(pass) = log((1/3) sum_c exp(-sigma_c t)) (``medium.pass_probability`` in log form)."""
     return _lsum3(_neg_tau(sigma_t[0], t), _neg_tau(sigma_t[1], t), _neg_tau(sigma_t[2], t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _log_sigma_tr(sigma, t):
     """log(sigma exp(-sigma t)); -inf for sigma = 0 (that channel never collides)."""
     if sigma > 0.0:
@@ -78,19 +78,19 @@ def _log_sigma_tr(sigma, t):
     return -math.inf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def log_distance_pdf(sigma_t, t):
     """log((1/3) sum_c sigma_c exp(-sigma_c t)) (``medium.distance_pdf`` in log form)."""
     return _lsum3(_log_sigma_tr(sigma_t[0], t), _log_sigma_tr(sigma_t[1], t), _log_sigma_tr(sigma_t[2], t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _log_tr(lt, sigma_t, t):
     """Add log T(t) per channel to the 3-tuple lt."""
     return (lt[0] + _neg_tau(sigma_t[0], t), lt[1] + _neg_tau(sigma_t[1], t), lt[2] + _neg_tau(sigma_t[2], t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _log_scatter(lt, sigma_t, albedo, t):
     """Add log(sigma_s T(t)) per channel (sigma_s = albedo sigma_t; -inf where it is 0)."""
     return (lt[0] + _log_sigma_tr(albedo[0] * sigma_t[0], 0.0) - _tau0(sigma_t[0], t),
@@ -98,12 +98,12 @@ def _log_scatter(lt, sigma_t, albedo, t):
             lt[2] + _log_sigma_tr(albedo[2] * sigma_t[2], 0.0) - _tau0(sigma_t[2], t))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _tau0(sigma, t):
     return -_neg_tau(sigma, t)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def offset_flight(sa, o, d, tmax, medium, tau, scatter, stack):
     """The offset's flight along its own ray (o, d) from its vertex, in ``medium``: to the scattering
     vertex at total distance ``tau`` (``scatter``: the distance copy) or to the first non-null surface
@@ -143,7 +143,7 @@ def offset_flight(sa, o, d, tmax, medium, tau, scatter, stack):
     return EV_FAIL, -1, o, ZERO3, ZERO3, medium, lt, lp
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def segment_to(sa, p, ng, q, medium, collide, stack):
     """The reconnected segment p -> q (p on a surface of geometric normal ng, or a medium vertex with
     ng = 0) crossing null interfaces: ``(ok, log_f (3), log_pdf, medium at q)``. ``collide``: q is a
@@ -187,7 +187,7 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
     return False, lt, lp, medium
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def base_flight(sa, o, d, tmax, medium, beta, seed, key, s, seg, stack):
     """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
     numbers and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,

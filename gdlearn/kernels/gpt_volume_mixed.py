@@ -41,7 +41,7 @@ from gdlearn.shifts.reconnection import reconnect
 ONE3 = (1.0, 1.0, 1.0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, broken, stack):
     """volpath's flight along offset k's ray with the base's random numbers of segment seg0 on (module
     docstring). False if it ends in no event or after another number of null interfaces than the
@@ -58,7 +58,7 @@ def replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, broken, stack):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, x_b, ng_b, prim_b, med_b, vb_medium, cls_x, threshold,
                               stack):
     """Would the backward shift (base: offset k, whose new vertex y2 is its current one; offset: the base
@@ -79,7 +79,7 @@ def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, x_b, ng_b, prim_b, med
     return seg_ok and med_arr == oi[k, I_MED]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _continue(sa, of, oi, k, action, medium_o, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, us, p2, ng2, threshold, broken,
               stack):
     """The offset's own next direction (replay, or the half-vector copy) and its ray. Returns
@@ -100,7 +100,7 @@ def _continue(sa, of, oi, k, action, medium_o, mat_o, x_b, wi_b, wo_b, pdf_b, de
     return ok, lcls, pdf_o, delta_o
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def shift_free_mixed(sa, of, oi, k, policy, vb_camera, vb_medium, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, pdf_b,
                      delta_b, cls_s, us, ev, prim2, p2, ng2, ns2, med2, cls_next, seg0, seg_b, seed, key, s, lp_b,
                      threshold, broken, stats, stack):
@@ -141,7 +141,7 @@ def shift_free_mixed(sa, of, oi, k, policy, vb_camera, vb_medium, x_b, ng_b, pri
     return ok
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def _advance(of, oi, k, p_o, pdf_o, delta_o, medium_o, lcls):
     set3(of, k, F_PREV_P, p_o)
     of[k, F_PREV_PDF] = pdf_o

@@ -49,12 +49,12 @@ K_SURFACE, K_MEDIUM, K_ESCAPED = 0, 1, 2
 BROKEN_TRANSMITTANCE = 10
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def start_offsets(sa, fx, fy, x, y, w, h, of, oi):
     """The pixel shift (Eq. 3): the neighbours' camera rays with the base's sub-pixel jitter, in the
     camera's medium. Their first flight is shifted once the base's is known."""
@@ -78,7 +78,7 @@ def start_offsets(sa, fx, fy, x, y, w, h, of, oi):
         oi[k, I_ALIVE] = ALIVE
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def set_vertex(sa, of, oi, k, kind, prim, p, ng, ns, d, medium):
     """Make the event of a flight along d offset k's current vertex."""
     set3(of, k, F_POS, p)
@@ -92,7 +92,7 @@ def set_vertex(sa, of, oi, k, kind, prim, p, ng, ns, d, medium):
     oi[k, I_MED] = medium
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def set_ray(of, oi, k, o, d, medium):
     set3(of, k, F_O, o)
     set3(of, k, F_D, d)
@@ -100,7 +100,7 @@ def set_ray(of, oi, k, o, d, medium):
     oi[k, I_MED] = medium
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False, forceinline=True)
 def scale_log(of, k, log_f, log_p):
     """beta'_c *= exp(log f'_c - log p) (f' the offset's factor, p the base's density)."""
     b = get3(of, k, F_BETA)
@@ -108,7 +108,7 @@ def scale_log(of, k, log_f, log_p):
                          b[2] * math.exp(log_f[2] - log_p)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def pair(diff, summ, of, oi, k, co, cb, broken):
     """Eq. 16 with Eq. 17's weight for one technique: D += w (C' - C), S += w C'; a failed shift
     D -= C (w = 1, offset 0). w = 0 (offset density overwhelming) adds nothing, even if C' overflowed."""
@@ -124,7 +124,7 @@ def pair(diff, summ, of, oi, k, co, cb, broken):
             diff[k, c] -= cb[c]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def nee_offset(sa, em, q, nq, of, oi, k, stack):
     """Next event of offset k's vertex towards the fixed light point q (area Jacobian 1): Le / pdf,
     the BSDF (surface) or phase function (medium), the transmittance of the offset's *own* shadow
@@ -159,7 +159,7 @@ def nee_offset(sa, em, q, nq, of, oi, k, stack):
     return sc3(mul3(mul3(f, w_em), tr), mw)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, mask, medium_vertex, threshold, broken, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every live offset
     by reconnecting to the same light point (directional / constant: the same direction)."""
@@ -188,7 +188,7 @@ def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, mask, medium_vertex,
         pair(diff, summ, of, oi, k, co, cb, broken)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def update(of, k, f, j, pdf_o, pdf_b):
     """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0)."""
     set3(of, k, F_BETA, sc3(mul3(get3(of, k, F_BETA), f), j / pdf_b))
@@ -196,7 +196,7 @@ def update(of, k, f, j, pdf_o, pdf_b):
     of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def replay_phase(sa, of, oi, k, u1, u2):
     """Phase sampling at a medium vertex, replayed (STAR Sec. 3.1): the base's random numbers through
     the offset's own HG lobe. HG is sampled exactly, so f'/p' = 1 and the replay Jacobian p_b / p'
@@ -208,7 +208,7 @@ def replay_phase(sa, of, oi, k, u1, u2):
     return pdf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, lp_b, broken, stack):
     """Reconnection of offset vertex x'_i (surface or medium) to the base's next vertex x_{i+1}
     (surface or medium; STAR Sec. 3.3, Jacobian 1 in area / volume). In the (direction, distance)
@@ -252,7 +252,7 @@ def reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, l
     return True, pdf
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def follow(sa, of, oi, k, vb_medium, mat_b, wo_b_local, wo_b, weight_b, pdf_b, delta_b, cls_b, x_b, threshold):
     """Offset k shares the base vertex x_b: the same outgoing direction (J = 1). A JOINED offset
     arrives from its own direction, so f and the density differ once more (a delta lobe cannot be
@@ -287,7 +287,7 @@ def follow(sa, of, oi, k, vb_medium, mat_b, wo_b_local, wo_b, weight_b, pdf_b, d
     set3(of, k, F_PREV_P, x_b)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def push_medium_vertex(oi):
     """Every live offset that has just reached a medium vertex (with the base, or on its own under a
     mixed policy's replayed flight): its class joins the path state."""
