@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from gdlearn.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
+from gdlearn.teaching.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
 
 ROOT = Path(__file__).resolve().parent.parent
 EXERCISES = list_exercises()
@@ -27,12 +27,12 @@ def _env(**extra):
 
 
 def _check(name: str, solution: bool, exercises_dir: Path | None = None):
-    """Run gdlearn.exercises.check in a child; return (exit status, printed report)."""
+    """Run gdlearn.teaching.exercises.check in a child; return (exit status, printed report)."""
     patch = ""
     if exercises_dir is not None:
         patch = (f"e.EXERCISES_DIR = pathlib.Path({str(exercises_dir)!r}); "
                  f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; ")
-    code = ("import pathlib, sys; import gdlearn.exercises as e; " + patch +
+    code = ("import pathlib, sys; import gdlearn.teaching.exercises as e; " + patch +
             f"r = e.check({name!r}, solution={solution}); print(r.text()); sys.exit(0 if r.ok else 1)")
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(), capture_output=True,
                          text=True, timeout=300)
