@@ -60,12 +60,35 @@ def test_solution_passes_its_exercise_tests(name):
     assert res.returncode == 0, f"the solution of {name} fails its tests:\n{res.stdout[-3000:]}"
 
 
+def _pristine_stub(name: str) -> str:
+    """The stub as the repository ships it: from git's HEAD, so that a student who solves an
+    exercise in place (as its README says) does not turn this test red; the working copy only when
+    git cannot tell (no repository, or a stub not committed yet)."""
+    rel = f"exercises/{name}/{module_name(name)}.py"
+    res = subprocess.run(["git", "show", f"HEAD:{rel}"], cwd=ROOT, capture_output=True, text=True)
+    return res.stdout if res.returncode == 0 else (ROOT / rel).read_text()
+
+
 @pytest.mark.parametrize("name", EXERCISES)
-def test_stub_fails_with_readable_feedback(name):
-    rc, out = _check(name, solution=False)
+def test_stub_fails_with_readable_feedback(name, tmp_path):
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / name, work / name)
+    (work / name / f"{module_name(name)}.py").write_text(_pristine_stub(name))
+    rc, out = _check(name, solution=False, exercises_dir=work)
     assert rc == 1, f"the untouched stub of {name} should fail its checks:\n{out}"
     assert "FAIL" in out and "checks passed" in out, out
     assert "Traceback" not in out, f"feedback must not be a traceback wall:\n{out}"
+
+
+def test_a_solved_stub_passes_in_place(tmp_path):
+    """A student solves the exercise in its own folder: `gdlearn check` then passes, and the stub
+    test above (which reads the pristine stub) is unaffected."""
+    name = "mis-weights"
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / name, work / name)
+    shutil.copy(SOLUTIONS_DIR / f"{module_name(name)}.py", work / name / f"{module_name(name)}.py")
+    rc, out = _check(name, solution=False, exercises_dir=work)
+    assert rc == 0 and "Well done" in out, out
 
 
 def test_wrong_distribution_is_caught(tmp_path):

@@ -91,3 +91,15 @@ class Sentence:
 
     def __repr__(self) -> str:
         return self.text
+
+
+def times(ratio: float, above: str, below: str, fmt: str = ".1f", tie: float = 0.0) -> Sentence:
+    """A measured ratio in words whose direction follows the number: ``times(3.2, "lower", "higher")``
+    -> "3.2 times lower", ``times(0.5, "lower", "higher")`` -> "2.0 times higher". Within ``tie``
+    of 1 (e.g. 0.05) it says "about as low/high" -- "about the same" -- instead of a direction."""
+    r = float(ratio)
+    if not r > 0 or r != r:
+        return Sentence(f"not measurable (ratio {r})")
+    if tie and abs(r - 1) <= tie:
+        return Sentence(f"about the same ({r:{fmt}} times)")
+    return Sentence(f"{r:{fmt}} times {above}" if r >= 1 else f"{1 / r:{fmt}} times {below}")
