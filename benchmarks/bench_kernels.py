@@ -15,7 +15,7 @@ import time
 import numpy as np
 from numba import njit
 
-from gdlearn.kernels.bsdf.dispatch import dispatch as B
+from gdlearn.kernels.bsdf import dispatch as B
 from gdlearn.kernels.media import medium as M
 from gdlearn.kernels.media import phase as P
 from gdlearn.scene.model import BSDF, rgb

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from gdlearn.kernels.bsdf.dispatch import dispatch as B
+from gdlearn.kernels.bsdf import dispatch as B
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf.plastic import ROUGHPLASTIC_WIDTH
 from gdlearn.scene.model import BSDF, rgb

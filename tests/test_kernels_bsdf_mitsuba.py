@@ -4,7 +4,7 @@ import zlib
 import numpy as np
 import pytest
 
-from gdlearn.kernels.bsdf.dispatch import dispatch as B
+from gdlearn.kernels.bsdf import dispatch as B
 from gdlearn.kernels.bsdf.plastic import ROUGHPLASTIC_WIDTH
 from gdlearn.scene.model import BSDF, rgb
 

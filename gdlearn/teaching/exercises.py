@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 #: Where the exercises live: the repository's exercises/ folder, beside the gdlearn package.
-EXERCISES_DIR = Path(__file__).resolve().parent.parent / "exercises"
+EXERCISES_DIR = Path(__file__).resolve().parents[2] / "exercises"
 SOLUTIONS_DIR = EXERCISES_DIR / "_solutions"
 #: Environment variable that points the tests at the reference solution instead of the stub.
 TARGET_ENV = "GDLEARN_EXERCISE_TARGET"
