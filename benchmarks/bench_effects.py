@@ -33,9 +33,9 @@ def timed(pt, kernel, spp, repeats):
     compile_s = time.perf_counter() - t0
     times, cpu, img = [], [], None
     for r in range(repeats):
-        out = np.zeros((pt.height, pt.width, 3))
+        out = np.zeros((pt.setup.height, pt.setup.width, 3))
         t0, c0 = time.perf_counter(), time.process_time()
-        pt._run(pt.sa, r * spp, spp, out)
+        pt._run(r * spp, spp, out)
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
         img = out if img is None else img + out
@@ -54,7 +54,7 @@ def main(argv=None):
     scene = load(a.scene, res=a.res, max_depth=a.max_depth)
     pt = make("pt", scene, seed=1, threads=a.threads)
     print(f"{a.scene} {a.res}x{a.res}, {a.spp} spp x {a.repeats} repeats, max_depth {a.max_depth}, "
-          f"{a.threads} threads; plan: media={pt.plan.media} -> kernel {pt.kernel.__name__}")
+          f"{a.threads} threads; plan: media={pt.setup.plan.media} -> kernel {pt.kernel.__name__}")
     n = a.res * a.res * a.spp
     t_s, u_s, c_s, img_s = timed(pt, render_rows_path, a.spp, a.repeats)
     t_v, u_v, c_v, img_v = timed(pt, render_rows_volpath, a.spp, a.repeats)

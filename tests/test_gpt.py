@@ -60,7 +60,7 @@ def _frames(scene, shift, broken=0, n=N_SEEDS, **opts):
     out = []
     for seed in range(n):
         integ = make("gpt", scene, seed=1000 + seed, spp_per_pass=SPP, shift=shift, **opts)
-        integ._broken = broken
+        integ.broken = broken
         out.append(render(integ, spp=SPP))
     return out
 
@@ -195,7 +195,7 @@ def test_primal_is_the_path_tracer_without_roulette():
     sc = _scene("caustics-box")
     g = make("gpt", sc, seed=3, spp_per_pass=2)
     p = make("pt", sc, seed=3, spp_per_pass=2)
-    g.rr_depth = p.rr_depth = 1 << 20
+    g.setup.rr_depth = p.setup.rr_depth = 1 << 20
     a, b = render(g, spp=4).images["primal_base"], render(p, spp=4).primal
     assert b.mean() > 0
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)   # only the order of products differs

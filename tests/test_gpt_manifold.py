@@ -51,7 +51,7 @@ def _run(name, broken=0, effects=None):
             for seed in range(N_SEEDS):
                 integ = make("gpt", _scene_fx(name, effects), seed=1000 + seed, spp_per_pass=FX_SPP[name],
                              shift=POLICY, effects=effects)
-                integ._broken = broken
+                integ.broken = broken
                 frames.append(render(integ, spp=FX_SPP[name]))
             _CACHE[name, broken, effects] = frames
     return _CACHE[name, broken, effects]

@@ -55,12 +55,12 @@ def _medium_variant(sigma_t=None, g=None):
 
 def trace(integ, seed, spp, policy, broken=0, sample0=0):
     """One call of the kernel: (out (9, H, W, 3), stats dict, dropped samples)."""
-    h, w = integ.height, integ.width
+    h, w = integ.setup.height, integ.setup.width
     out = np.zeros((9, h, w, 3))
     st = np.zeros((h, N_STATS), dtype=np.int64)
     bad = np.zeros(h, dtype=np.int64)
-    gpt_volume_rows(integ.sa, seed, sample0, spp, policy_code(policy), integ.max_depth, integ.rr_depth, integ.mask,
-                    integ.threshold, broken, out, st, bad)
+    gpt_volume_rows(integ.setup.sa, seed, sample0, spp, policy_code(policy), integ.setup.max_depth, integ.setup.rr_depth, integ.setup.mask,
+                    integ.setup.threshold, broken, out, st, bad)
     return out, stats_dict(st.sum(axis=0)), int(bad.sum())
 
 
@@ -211,7 +211,7 @@ def test_base_radiance_is_pt_bit_for_bit_without_roulette():
     max over base and offsets, so only it may differ) L equals pt's image exactly."""
     sc = _scene()
     pt = make("pt", sc, seed=3, spp_per_pass=4)
-    pt.rr_depth = 1 << 20
+    pt.setup.rr_depth = 1 << 20
     ref = render(pt, spp=4).primal
     out, _, nbad = trace(pt, 3, 4, "halfvector+reconnection")
     assert ref.mean() > 0 and nbad == 0

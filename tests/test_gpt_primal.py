@@ -106,7 +106,7 @@ def _check(name, broken=0):
     frames = []
     for s in range(N_SEEDS):
         integ = make("gpt", sc, seed=1000 + s, spp_per_pass=SPP)
-        integ._broken = broken
+        integ.broken = broken
         frames.append(render(integ, spp=SPP))
     g = np.stack([f.primal for f in frames])
     base = np.stack([f.images["primal_base"] for f in frames])

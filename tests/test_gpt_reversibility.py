@@ -163,7 +163,7 @@ def _scene(name, res):
 def check(scene_name, policy, broken=0, res=16, spp=16, seed=5):
     """Forward and backward shifts of res^2 * spp base paths (rightward); returns counters."""
     integ = make("pt", _scene(scene_name, res))
-    sa, th, code = integ.sa, integ.threshold, policy_code(policy)
+    sa, th, code = integ.setup.sa, integ.setup.threshold, policy_code(policy)
     w = h = res
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     rec, irec = np.zeros((MAXV + 1, NR)), np.zeros((MAXV + 1, NRI), dtype=np.int64)

@@ -1,20 +1,28 @@
 """One protocol for every estimator: progressive passes that yield :class:`Frame` objects.
 
-Every integrator in gdlearn -- the primal path tracer, the gradient-domain path tracers, and later
-the photon-density estimators -- renders *progressively*: each call of ``render_pass`` adds one
-independent pass of samples, and the shared :class:`ProgressiveIntegrator` accumulates it. A frame
-carries everything the rest of the road needs:
+Every integrator in gdlearn -- the primal path tracer, the gradient-domain path tracers and the
+photon-density estimators -- renders *progressively*: each call of ``render_pass`` adds one pass,
+and the shared :class:`ProgressiveIntegrator` folds it into the frame. How passes combine is the
+estimator's choice (:mod:`gdlearn.integrators.combine`): a mean of independent passes, or the
+estimator's own per-pixel state (SPPM). A frame carries everything the rest of the road needs:
 
-* ``primal``: the accumulated primal image (H x W x 3, float64, linear RGB);
+* ``primal``: the primal image (H x W x 3, float64, linear RGB);
 * ``gx`` / ``gy``: forward-difference gradient images, ``gx[y, x] ~ I[y, x+1] - I[y, x]`` and
   ``gy[y, x] ~ I[y+1, x] - I[y, x]`` (None for primal-only estimators);
-* two independent half-buffers of every image (passes alternate between them), from which the
-  weighted reconstructions estimate per-pixel variances (:meth:`Frame.variance`);
-* shift statistics (success / failure / null / mixed counts) and non-finite-sample counts;
-* the wall time of each stage (``trace``, ``shift``, ``gather``, ...), with JIT compilation kept
-  apart in ``compile``, so the experiments module can compare estimators at equal time.
+* two independent half-buffers of every image, from which the weighted reconstructions estimate
+  per-pixel variances (:meth:`Frame.variance`);
+* shift statistics (success / failure / null / mixed counts) and non-finite-sample counts, summed
+  over passes; ``state``, values that are not summed (a radius, alpha, photons emitted: the last
+  pass's value); ``photons``, the light paths emitted so far (the photon estimators' normalisation
+  and budget);
+* the wall time of each stage (``trace``, ``photons``, ``build``, ``gather``, ...), with JIT
+  compilation kept apart in ``compile``, so the experiments module can compare estimators at equal
+  time.
 
-An integrator subclass implements only :meth:`ProgressiveIntegrator.render_pass`.
+An integrator subclass implements :meth:`ProgressiveIntegrator.render_pass` (photon estimators:
+the four stages of :class:`gdlearn.integrators.photon_base.PhotonPassIntegrator`) and usually
+:meth:`ProgressiveIntegrator.compile`. :func:`render` runs one to a budget in samples per pixel,
+seconds, passes or photons.
 """
 from __future__ import annotations
 
@@ -24,18 +32,26 @@ from typing import Iterator
 
 import numpy as np
 
-#: Names of the image buffers an integrator may produce, in the order they are written to disk.
-BUFFER_NAMES = ("primal", "gx", "gy")
+from .combine import LatestEstimate, MeanOfPasses
 
 
 @dataclass
 class PassResult:
-    """What one pass returns: per-pixel *means over this pass's samples* for each buffer it produces,
-    the pass's samples per pixel, its stage timings (seconds) and counters (shift statistics etc.)."""
+    """What one pass returns.
+
+    ``images``: per-pixel *means over this pass's samples* (:class:`MeanOfPasses`) or the estimator's
+    current full estimate (:class:`LatestEstimate`); ``spp``: the pass's camera samples per pixel;
+    ``timings``: its stage wall times (seconds); ``stats``: counters, summed over passes; ``state``:
+    values that are not summed (last value wins); ``halves``: ``{name: (a, b)}``, two independent
+    estimates made inside the pass (at equal radius), when the pass makes them itself; ``photons``:
+    light paths emitted in this pass."""
     images: dict[str, np.ndarray]
     spp: int
     timings: dict[str, float] = field(default_factory=dict)
     stats: dict[str, int] = field(default_factory=dict)
+    state: dict[str, object] = field(default_factory=dict)
+    halves: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
+    photons: int = 0
 
 
 @dataclass
@@ -49,6 +65,8 @@ class Frame:
     stats: dict[str, int]
     elapsed: float                    # wall seconds spent in passes, JIT compile excluded
     interrupted: bool = False
+    state: dict[str, object] = field(default_factory=dict)
+    photons: int = 0
 
     @property
     def primal(self) -> np.ndarray:
@@ -63,7 +81,7 @@ class Frame:
         return self.images.get("gy")
 
     def variance(self, name: str = "primal") -> np.ndarray:
-        """Per-pixel variance of the accumulated estimate ``images[name]``, from the two halves.
+        """Per-pixel variance of the estimate ``images[name]``, from the two halves.
 
         With independent half means A, B (each over half the samples) the full mean is (A + B) / 2 and
         an unbiased estimate of its variance is (A - B)^2 / 4.
@@ -72,31 +90,35 @@ class Frame:
         return 0.25 * (a - b) ** 2
 
     def buffers(self) -> dict[str, np.ndarray]:
-        """Every buffer for ``--buffers DIR``: images, halves (``<name>_a``/``<name>_b``), variances."""
+        """Every buffer for ``--buffers DIR``: images, halves (``<name>_a``/``<name>_b``), variances,
+        and every array-valued ``state`` entry (a per-pixel radius or photon count map)."""
         out = dict(self.images)
         for name, (a, b) in self.halves.items():
             out[f"{name}_a"], out[f"{name}_b"] = a, b
             out[f"{name}_var"] = self.variance(name)
+        for name, v in self.state.items():
+            if isinstance(v, np.ndarray) and v.ndim >= 2:
+                out[name] = v
         return out
 
 
 class ProgressiveIntegrator:
-    """Base class: accumulation, half-buffers, timings, NaN/Inf guards and Ctrl-C safety.
+    """Base class: the pass loop, timings, NaN/Inf guards and Ctrl-C safety.
 
-    Subclasses set ``name`` and implement :meth:`render_pass` (and usually :meth:`compile`, which
-    runs the numba kernels once on a tiny problem so compile time is measured apart).
+    Subclasses set ``name``, choose ``combine`` (:class:`MeanOfPasses` by default, or
+    :class:`LatestEstimate`) and implement :meth:`render_pass` and usually :meth:`compile`, which
+    runs the numba kernels once on a tiny problem so compile time is measured apart.
     """
 
     name = "abstract"
+    combine = MeanOfPasses
 
     def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1):
         self.scene = scene
         self.seed = int(seed)
         self.spp_per_pass = int(spp_per_pass)
-        self._sums: dict[str, list[np.ndarray]] = {}
-        self._counts = [0, 0]            # samples per pixel in half A and half B
-        self._timings: dict[str, float] = {}
-        self._stats: dict[str, int] = {}
+        self._combined = self.combine()
+        self._compile_s: float | None = None
         self._passes = 0
         self._elapsed = 0.0
 
@@ -110,16 +132,17 @@ class ProgressiveIntegrator:
 
     # -- progressive driver ------------------------------------------------------------------------
     def warmup(self) -> float:
-        t = self.compile()
-        self._timings["compile"] = self._timings.get("compile", 0.0) + t
-        return t
+        """Compile once (:meth:`compile`); every later call returns the first call's seconds."""
+        if self._compile_s is None:
+            self._compile_s = float(self.compile())
+        return self._compile_s
 
     def step(self) -> Frame:
         """Render one more pass and return the updated frame."""
         t0 = time.perf_counter()
         res = self.render_pass(self._passes)
         wall = time.perf_counter() - t0
-        self._accumulate(res)
+        self._combined.add(res, self._passes)
         self._elapsed += wall
         self._passes += 1
         return self.frame()
@@ -129,55 +152,45 @@ class ProgressiveIntegrator:
         while True:
             yield self.step()
 
-    def _accumulate(self, res: PassResult) -> None:
-        h = self._passes % 2           # passes alternate between the two independent halves
-        for name, img in res.images.items():
-            img = np.asarray(img, dtype=np.float64)
-            bad = ~np.isfinite(img)
-            if bad.any():              # a guard upstream missed: count it, never let it through
-                self._stats["nonfinite_pixels"] = self._stats.get("nonfinite_pixels", 0) + int(bad.sum())
-                img = np.where(bad, 0.0, img)
-            sums = self._sums.setdefault(name, [np.zeros_like(img), np.zeros_like(img)])
-            sums[h] += img * res.spp
-        self._counts[h] += res.spp
-        for k, v in res.timings.items():
-            self._timings[k] = self._timings.get(k, 0.0) + v
-        for k, v in res.stats.items():
-            self._stats[k] = self._stats.get(k, 0) + int(v)
-
     def frame(self, interrupted: bool = False) -> Frame:
-        na, nb = self._counts
-        n = max(na + nb, 1)
-        images, halves = {}, {}
-        for name, (a, b) in self._sums.items():
-            images[name] = (a + b) / n
-            # Before the second pass exists, both halves are the same single estimate.
-            halves[name] = (a / max(na, 1), b / nb if nb else a / max(na, 1))
-        return Frame(self._passes, na + nb, images, halves, dict(self._timings), dict(self._stats),
-                     self._elapsed, interrupted)
+        c = self._combined
+        images, halves = c.images_and_halves()
+        timings = {} if self._compile_s is None else {"compile": self._compile_s}
+        timings.update(c.timings)
+        return Frame(self._passes, c.spp, images, halves, timings, dict(c.stats), self._elapsed, interrupted,
+                     dict(c.state), c.photons)
+
+
+def _done(frame: Frame, spp, seconds, passes, photons) -> bool:
+    return ((spp is not None and frame.spp >= spp) or (seconds is not None and frame.elapsed >= seconds)
+            or (passes is not None and frame.passes >= passes) or (photons is not None and frame.photons >= photons))
 
 
 def render(integrator: ProgressiveIntegrator, spp: int | None = None, seconds: float | None = None,
-           progress: bool = False) -> Frame:
-    """Run ``integrator`` until ``spp`` samples per pixel or ``seconds`` of wall time (whichever comes
-    first; at least one pass). JIT compilation happens first and is not counted. Ctrl-C stops early
-    and returns what was accumulated, with ``frame.interrupted`` set."""
-    if spp is None and seconds is None:
+           progress: bool = False, *, passes: int | None = None, photons: int | None = None) -> Frame:
+    """Run ``integrator`` until ``spp`` samples per pixel, ``seconds`` of wall time, ``passes`` passes
+    or ``photons`` light paths, whichever comes first (at least one pass; with no budget, the scene's
+    spp). JIT compilation happens first and is not counted. Ctrl-C stops early and returns what was
+    accumulated, with ``frame.interrupted`` set."""
+    if spp is None and seconds is None and passes is None and photons is None:
         spp = getattr(integrator.scene.sensor, "spp", 4)
     integrator.warmup()
     bar = None
     if progress:
         from tqdm.auto import tqdm
-        bar = tqdm(total=spp, unit="spp", disable=None) if spp else tqdm(unit="pass", disable=None)
+        if spp is not None:
+            bar = tqdm(total=spp, unit="spp", disable=None)
+        else:
+            bar = tqdm(total=passes, unit="pass", disable=None)
     frame = integrator.frame()
     try:
         while True:
             frame = integrator.step()
             if bar is not None:
-                bar.update(integrator.spp_per_pass if spp else 1)
-            if spp is not None and frame.spp >= spp:
-                break
-            if seconds is not None and frame.elapsed >= seconds:
+                bar.update(integrator.spp_per_pass if spp is not None else 1)
+                if frame.photons:
+                    bar.set_postfix(photons=f"{frame.photons:.3g}", refresh=False)
+            if _done(frame, spp, seconds, passes, photons):
                 break
     except KeyboardInterrupt:
         frame = integrator.frame(interrupted=True)
@@ -185,3 +198,6 @@ def render(integrator: ProgressiveIntegrator, spp: int | None = None, seconds: f
         if bar is not None:
             bar.close()
     return frame
+
+
+__all__ = ["PassResult", "Frame", "ProgressiveIntegrator", "MeanOfPasses", "LatestEstimate", "render"]

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -43,21 +42,20 @@ from ..kernels.gpt_path import gpt_sample
 from ..kernels.gpt_manifold import NCF, NCI, manifold_table
 from ..kernels.gpt_replay_policy import replay_sample
 from ..kernels.gpt_shift import NF, NI
+from ..kernels.gpt_volume import gpt_volume_rows
 from ..kernels.rng import rand
 from ..scene.compile import borrowed
 from ..shifts.manifold import SH_WIDTH
 from ..shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION, POLICY_REPLAY,
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from ..shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
-from .base import PassResult
-from .pt import PathTracer, compile_by_tracing
+from .base import PassResult, ProgressiveIntegrator
+from .setup import SceneSetup, compile_by_tracing
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
 SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
              "halfvector+replay+reconnection")
-#: none left; ``experimental=True`` is still accepted (and ignored) for old callers
-EXPERIMENTAL = ()
 #: the default wherever the manifold walk does not run: the mixed half-vector policy (on scenes without
 #: glossy or specular vertices it runs exactly replay+reconnection's shifts). Measured 2026-12-01 with
 #: benchmarks/bench_gpt.py --res 32 --grad-spp 16 --seeds 24 --et-seeds 3 --seconds 4 --threads 1
@@ -173,86 +171,73 @@ def mis_primal(out: np.ndarray) -> np.ndarray:
     return 0.25 * acc
 
 
-def _volume_kernel():
-    """The media twin of :func:`gpt_rows` (same signature and out contract), imported only when a scene
-    needs it; a clear error until gdlearn.kernels.gpt_volume exists."""
-    try:
-        from ..kernels.gpt_volume import gpt_volume_rows
-    except ImportError:
-        raise ValueError("gpt: scenes with media or null interfaces are not supported yet; fix: render "
-                         "them with --integrator gpt-replay") from None
-    return gpt_volume_rows
+def _has_null_or_media(setup) -> bool:
+    return bool(setup.media) or setup.has_null
 
 
-def _has_null_or_media(integ) -> bool:
-    return bool(integ.media) or any(s.bsdf is not None and s.bsdf.type == "null" for s in integ.scene.shapes)
-
-
-def default_policy(integ) -> str:
-    """The policy ``shift=None`` picks for a constructed PathTracer ``integ`` (its scene, plan and compiled
-    arrays; :data:`DEFAULT_RULE`): :data:`MANIFOLD_POLICY` where the effects plan renders caustics
+def default_policy(setup) -> str:
+    """The policy ``shift=None`` picks for a :class:`~gdlearn.integrators.setup.SceneSetup` (its scene,
+    plan and compiled arrays; :data:`DEFAULT_RULE`): :data:`MANIFOLD_POLICY` where the effects plan renders caustics
     through specular chains, the scene has no media and at least one analytic specular shape the walk
     can move, else :data:`DEFAULT_POLICY` (measurements in its comment). The plan decides:
     ``--effects direct`` on a caustic scene renders no caustic, so no manifold code runs."""
-    if integ.plan.specular_chains and "caustics" in integ.plan.names and not _has_null_or_media(integ):
-        if np.any(manifold_table(integ.scene, integ.sa)[:, 0] >= 0.0):
+    if setup.plan.specular_chains and "caustics" in setup.plan.names and not _has_null_or_media(setup):
+        if np.any(manifold_table(setup.scene, setup.sa)[:, 0] >= 0.0):
             return MANIFOLD_POLICY
     return DEFAULT_POLICY
 
 
-class GradientPathTracer(PathTracer):
+class GradientPathTracer(ProgressiveIntegrator):
     """``make("gpt", scene, shift=None, seed=0, spp_per_pass=1, effects=None, threads=None,
-    max_depth=None)``; options as :class:`~gdlearn.integrators.pt.PathTracer` plus ``shift``, the
+    max_depth=None)``; options as :class:`~gdlearn.integrators.setup.SceneSetup` plus ``shift``, the
     policy name (one of :data:`SUPPORTED`; None: :func:`default_policy` for this scene and plan)."""
 
     name = "gpt"
 
-    def __init__(self, scene, *, shift: str | None = None, experimental: bool = False, **options):
-        super().__init__(scene, **options)
+    def __init__(self, scene, *, shift: str | None = None, seed: int = 0, spp_per_pass: int = 1, effects=None,
+                 threads=None, max_depth=None, sa=None):
+        self.setup = st = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
+        super().__init__(st.scene, seed=seed, spp_per_pass=spp_per_pass)
         if shift is None:
-            shift = default_policy(self)
+            shift = default_policy(st)
         code = policy_code(shift)
-        if shift not in SUPPORTED and not (experimental and shift in EXPERIMENTAL):
+        if shift not in SUPPORTED:
             raise ValueError(f"gpt: shift policy {shift!r} is not supported by this integrator yet; fix: use "
                              f"one of {', '.join(SUPPORTED)}")
         assert POLICIES[shift] == code
         self.shift, self.policy = shift, code
         self.kernel, self.mtab = gpt_rows, None
-        if _has_null_or_media(self):
-            self.kernel = _volume_kernel()
+        if _has_null_or_media(st):
+            self.kernel = gpt_volume_rows
             if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
                 raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "
                                  "halfvector+reconnection")
         elif code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
-            mtab = manifold_table(self.scene, self.sa)
-            if self.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
+            mtab = manifold_table(st.scene, st.sa)
+            if st.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
                 self.kernel, self.mtab = gpt_manifold_rows, mtab
             else:
                 # no specular chain the walk could move: the manifold code does not run (same estimator)
                 self.policy = POLICY_HALFVECTOR_RECONNECTION
         #: True when the manifold walk runs for this scene (plan + analytic specular shapes)
         self.manifold = self.mtab is not None
-        #: tests only: gpt_shift.BROKEN_MIS / BROKEN_JACOBIAN make a deliberately biased estimator
-        self._broken = 0
+        #: fault injection for the tests (gpt_shift.BROKEN_*): a deliberately biased estimator the
+        #: unbiasedness tests must reject; 0 is the estimator
+        self.broken = 0
 
     def trace(self, sample0: int, spp: int):
-        h, w = self.height, self.width
+        st = self.setup
+        h, w = st.height, st.width
         out = np.zeros((9, h, w, 3))
         stats = np.zeros((h, N_STATS), dtype=np.int64)
         bad = np.zeros(h, dtype=np.int64)
-        old = numba.get_num_threads()
-        if self.threads is not None:
-            numba.set_num_threads(int(self.threads))
-        try:
-            with numba.parallel_chunksize(max(1, h // 32)):
-                args = (self.sa, self.seed, sample0, spp, self.policy, self.max_depth, self.rr_depth, self.mask,
-                        self.threshold, self._broken, out, stats, bad)
-                if self.mtab is not None:
-                    self.kernel(*args, self.mtab)
-                else:
-                    self.kernel(*args)
-        finally:
-            numba.set_num_threads(old)
+        with st.parallel(h):
+            args = (st.sa, self.seed, sample0, spp, self.policy, st.max_depth, st.rr_depth, st.mask,
+                    st.threshold, self.broken, out, stats, bad)
+            if self.mtab is not None:
+                self.kernel(*args, self.mtab)
+            else:
+                self.kernel(*args)
         return out, stats.sum(axis=0), int(bad.sum())
 
     def compile(self) -> float:
@@ -266,7 +251,7 @@ class GradientPathTracer(PathTracer):
         gx, gy = combine_gradients(out[1:5], (1.0, 1.0))
         primal = mis_primal(out)
         t2 = time.perf_counter()
-        stats = {"paths": self.width * self.height * self.spp_per_pass, "nonfinite_samples": nbad}
+        stats = {"paths": self.setup.width * self.setup.height * self.spp_per_pass, "nonfinite_samples": nbad}
         for action, c in stats_dict(st).items():
             for outcome, v in c.items():
                 stats[f"shift_{action}_{outcome}"] = v

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -39,8 +38,8 @@ from ..kernels.volume_path import radiance_volpath
 from ..scene.compile import borrowed
 from ..shifts.replay import (DIM_SHIFT_RR, SHIFT_WEIGHTS, combine_gradients, neighbour_inside,
                              offset_film_position, shift_survival)
-from .base import PassResult
-from .pt import PathTracer, compile_by_tracing
+from .base import PassResult, ProgressiveIntegrator
+from .setup import SceneSetup, compile_by_tracing
 
 #: counters per row, in the order of the ``counts`` array of the kernels
 COUNT_NAMES = ("shifts_traced", "shifts_outside", "shifts_rr_skipped", "nonfinite_samples")
@@ -196,11 +195,11 @@ def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thre
                     out[j, y, x, c] = acc[j, c] * inv
 
 
-class ReplayGPT(PathTracer):
+class ReplayGPT(ProgressiveIntegrator):
     """``make("gpt-replay", scene, seed=0, spp_per_pass=1, effects=None, threads=None,
     max_depth=None, shift_weights=(0.5, 0.5), shift_rr=0.0, shift_rr_min=0.1)``.
 
-    Options as :class:`~gdlearn.integrators.pt.PathTracer`, plus:
+    Options as :class:`~gdlearn.integrators.setup.SceneSetup`, plus:
 
     * ``shift_weights`` (forward, backward): Eq. 16's constant weights; they must sum to 1 (any
       such pair is unbiased; 0.5 / 0.5 is Eq. 17 under replay).
@@ -212,9 +211,10 @@ class ReplayGPT(PathTracer):
 
     name = "gpt-replay"
 
-    def __init__(self, scene, *, shift_weights=SHIFT_WEIGHTS, shift_rr: float = 0.0,
-                 shift_rr_min: float = 0.1, **options):
-        super().__init__(scene, **options)
+    def __init__(self, scene, *, shift_weights=SHIFT_WEIGHTS, shift_rr: float = 0.0, shift_rr_min: float = 0.1,
+                 seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None, max_depth=None, sa=None):
+        self.setup = st = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
+        super().__init__(st.scene, seed=seed, spp_per_pass=spp_per_pass)
         wf, wb = (float(v) for v in shift_weights)
         if not abs(wf + wb - 1.0) < 1e-12:
             raise ValueError(f"shift_weights={shift_weights!r}: forward + backward must be 1 (0.5, 0.5 "
@@ -224,24 +224,18 @@ class ReplayGPT(PathTracer):
                              "in (0, 1] (a zero floor would bias gradients of black base paths)")
         self.shift_weights = (wf, wb)
         self.shift_rr, self.shift_rr_min = float(shift_rr), float(shift_rr_min)
-        self.replay_kernel = replay_rows_volpath if self.media else replay_rows_path
+        self.replay_kernel = replay_rows_volpath if st.media else replay_rows_path
 
     def trace(self, sample0: int, spp: int, diagnose: bool = False):
         """Run the kernel once: (out (5, H, W, 3), counts dict, diag (H, W, 4) or None)."""
-        h, w = self.height, self.width
+        st = self.setup
+        h, w = st.height, st.width
         out = np.zeros((5, h, w, 3))
         counts = np.zeros((h, 4), dtype=np.int64)
         diag = np.zeros((h, w, 4) if diagnose else (1, 1, 4))
-        old = numba.get_num_threads()
-        if self.threads is not None:
-            numba.set_num_threads(int(self.threads))
-        try:
-            # dynamic chunks of a few rows, as pt: rows differ in cost (the light, escaping rays)
-            with numba.parallel_chunksize(max(1, h // 32)):
-                self.replay_kernel(self.sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, self.mask,
-                                   self.threshold, self.shift_rr, self.shift_rr_min, out, counts, diag, diagnose)
-        finally:
-            numba.set_num_threads(old)
+        with st.parallel(h):
+            self.replay_kernel(st.sa, self.seed, sample0, spp, st.max_depth, st.rr_depth, st.mask, st.threshold,
+                               self.shift_rr, self.shift_rr_min, out, counts, diag, diagnose)
         return out, dict(zip(COUNT_NAMES, (int(v) for v in counts.sum(axis=0)))), (diag if diagnose else None)
 
     def compile(self) -> float:
@@ -253,7 +247,7 @@ class ReplayGPT(PathTracer):
         t1 = time.perf_counter()
         gx, gy = combine_gradients(out[1:], self.shift_weights)
         t2 = time.perf_counter()
-        stats = {"paths": self.width * self.height * self.spp_per_pass, **counts}
+        stats = {"paths": self.setup.width * self.setup.height * self.spp_per_pass, **counts}
         return PassResult(images={"primal": out[0], "gx": gx, "gy": gy}, spp=self.spp_per_pass,
                           timings={"trace": t1 - t0, "combine": t2 - t1}, stats=stats)
 

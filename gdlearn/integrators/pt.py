@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -28,13 +27,9 @@ from ..kernels import surface_packet
 from ..kernels.surface_packet import render_row_packet
 from ..kernels.surface_path import radiance_path_inline
 from ..kernels.volume_path import radiance_volpath_inline
-from ..scene.effects import plan as effects_plan
-from ..scene.compile import borrowed, compile_scene
+from ..scene.compile import borrowed
 from .base import PassResult, ProgressiveIntegrator
-
-#: Mitsuba's max_depth = -1 (unbounded) as a loop bound; Russian roulette ends such paths.
-UNBOUNDED = 1 << 30
-
+from .setup import SceneSetup
 
 @njit(cache=True, error_model="numpy")
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
@@ -124,90 +119,47 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
         bad[y] = nbad
 
 
-def compile_by_tracing(integ) -> float:
-    """JIT-compile an integrator whose kernels run through ``integ.trace(sample0, spp)``: trace one
-    sample of a 2 x 2 image (a tiny image compiles the same kernel types as any size); returns seconds."""
-    t0 = time.perf_counter()
-    h, w = integ.height, integ.width
-    integ.height, integ.width = 2, 2
-    try:
-        integ.trace(0, 1)
-    finally:
-        integ.height, integ.width = h, w
-    return time.perf_counter() - t0
-
-
 class PathTracer(ProgressiveIntegrator):
     """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None,
     packets=None)``.
 
-    ``max_depth`` overrides the scene integrator's (Mitsuba's meaning); ``threads`` sets numba's
-    thread count for this integrator's passes; ``effects`` (a list of effect names, or a comma
-    separated string) restricts the image to those light paths (see :mod:`gdlearn.scene.effects`).
+    ``max_depth``, ``threads`` and ``effects`` as :class:`~gdlearn.integrators.setup.SceneSetup`
+    (``self.setup``); ``packets``: None traces in packets where :mod:`gdlearn.kernels.surface_packet`
+    accepts the scene, False forces the one-path-at-a-time kernel, True insists (ValueError if the
+    scene is not eligible).
     """
 
     name = "pt"
 
     def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None,
                  max_depth=None, sa=None, packets=None):
-        super().__init__(scene, seed=seed, spp_per_pass=spp_per_pass)
-        if max_depth is not None:       # the plan must see the depth that will be rendered
-            import copy
-            scene = copy.copy(scene)
-            scene.integrator = copy.copy(scene.integrator)
-            scene.integrator.max_depth = int(max_depth)
-            self.scene = scene
-        if isinstance(effects, str):
-            effects = [e.strip() for e in effects.split(",") if e.strip()]
-        self.plan = effects_plan(scene, effects)
-        self.sa = sa if sa is not None else compile_scene(scene, self.plan)
-        md = scene.integrator.max_depth
-        md = UNBOUNDED if md < 0 else md
-        if self.plan.max_interior >= 0:          # the requested effects need no longer paths
-            md = min(md, self.plan.max_interior + 1)
-        self.max_depth = md
-        self.rr_depth = int(scene.integrator.rr_depth)
-        self.mask = int(self.plan.mask)
-        self.threshold = float(self.plan.roughness_threshold)
-        # the volume kernel runs only when the plan needs media (or volpath's null-interface rule)
-        has_null = any(s.bsdf.type == "null" for s in scene.shapes)
-        self.media = bool(self.plan.media) or (scene.integrator.type == "volpath" and has_null)
-        # packets of paths for the scenes surface_packet accepts (the same image, faster); packets=False
-        # forces the one-path-at-a-time kernel, packets=True insists (ValueError if not eligible)
-        can_pack = not self.media and surface_packet.eligible(self.sa, self.mask, self.max_depth)
+        self.setup = s = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
+        super().__init__(s.scene, seed=seed, spp_per_pass=spp_per_pass)
+        can_pack = not s.media and surface_packet.eligible(s.sa, s.mask, s.max_depth)
         if packets and not can_pack:
             raise ValueError("this scene cannot be traced in packets (kernels/surface_packet.py: diffuse BSDFs, area "
                              "emitters, triangles, no media, every diffuse path kept); fix: packets=None or False")
         self.packets = can_pack if packets is None else bool(packets) and can_pack
-        self.kernel = render_rows_volpath if self.media else (render_rows_packet if self.packets else render_rows_path)
-        self.threads = threads
-        self.width, self.height = scene.sensor.film.width, scene.sensor.film.height
+        self.kernel = render_rows_volpath if s.media else (render_rows_packet if self.packets else render_rows_path)
 
-    def _run(self, sa, sample0, spp, out):
+    def _run(self, sample0, spp, out):
+        s = self.setup
         bad = np.zeros(out.shape[0], dtype=np.int64)
-        old = numba.get_num_threads()
-        if self.threads is not None:
-            numba.set_num_threads(int(self.threads))
-        try:
-            # dynamic chunks of a few rows: rows differ in cost (light, boxes, escaping rays), and a
-            # static half/half split would leave one core idle at the end of every pass
-            with numba.parallel_chunksize(max(1, out.shape[0] // 32)):
-                self.kernel(sa, self.seed, sample0, spp, self.max_depth, self.rr_depth, self.mask, self.threshold,
-                            out, bad)
-        finally:
-            numba.set_num_threads(old)
+        with s.parallel(out.shape[0]):
+            self.kernel(s.sa, self.seed, sample0, spp, s.max_depth, s.rr_depth, s.mask, s.threshold, out, bad)
         return int(bad.sum())
 
     def compile(self) -> float:
         t0 = time.perf_counter()
-        self._run(self.sa, 0, 1, np.zeros((2, 2, 3)))
+        self._run(0, 1, np.zeros((2, 2, 3)))
         return time.perf_counter() - t0
 
     def render_pass(self, pass_index: int) -> PassResult:
-        out = np.zeros((self.height, self.width, 3))
+        s = self.setup
+        out = np.zeros((s.height, s.width, 3))
         t0 = time.perf_counter()
-        nbad = self._run(self.sa, pass_index * self.spp_per_pass, self.spp_per_pass, out)
+        nbad = self._run(pass_index * self.spp_per_pass, self.spp_per_pass, out)
         dt = time.perf_counter() - t0
-        n = self.width * self.height * self.spp_per_pass
+        n = s.width * s.height * self.spp_per_pass
         return PassResult(images={"primal": out}, spp=self.spp_per_pass, timings={"trace": dt},
                           stats={"paths": n, "nonfinite_samples": nbad})

@@ -8,7 +8,10 @@ number is a pure function of its coordinates, never of a stream's history. Three
 * random-sequence replay -- the book's first shift mapping (Hua et al. 2019, Sec. 2.3) -- is simply
   "the same key, another pixel": an offset path evaluates ``rand(seed, key_of_base_pixel, s, d)``.
 
-``key`` is usually the pixel index ``y * width + x``.
+Key spaces. Camera paths use ``key = y * width + x`` (below 2^40 for any image). Light paths use
+``key = LIGHT_KEY0 + j`` for light path j, with the pass index as ``sample``
+(:mod:`gdlearn.integrators.photon_base`): the two spaces never meet, so a photon map is independent
+of the image size, of the thread count and of the pixels' random numbers.
 
 The hash is SplitMix64's finaliser (Steele et al. 2014, "Fast splittable pseudorandom number
 generators"; it passes BigCrush as a counter-based generator), applied in a chain of four -- one per
@@ -40,6 +43,9 @@ _S31 = np.uint64(31)
 _S11 = np.uint64(11)
 _ONE = np.uint64(1)
 _INV53 = 1.0 / 9007199254740992.0   # 2^-53
+
+#: first key of the light paths' key space (camera paths: the pixel index, always below it)
+LIGHT_KEY0 = 1 << 40
 
 
 @njit(cache=True, forceinline=True)
