@@ -14,6 +14,8 @@ REGISTRY = {
     "pt": "gdlearn.integrators.pt:PathTracer",
     "gpt-replay": "gdlearn.integrators.gpt_replay:ReplayGPT",
     "gpt": "gdlearn.integrators.gpt:GradientPathTracer",
+    "sppm": "gdlearn.integrators.photon.sppm:SPPM",
+    "ppm": "gdlearn.integrators.photon.sppm:PPM",
 }
 
 

@@ -33,18 +33,13 @@ from ..kernels import layout as L
 from ..kernels.bsdf import bsdf_eta, bsdf_pdf, bsdf_sample, sampled_lobe_class, vertex_class
 from ..kernels.bvh import STACK_SIZE, closest_hit_inline
 from ..kernels.geometry import INFO_MAT, offset_origin, surface
-from ..kernels.rng import path_state, rand_at
+from ..kernels.rng import LIGHT_KEY0, path_state, rand_at
 from ..kernels.scene_query import borrow
 from ..kernels.vec import coordinate_system, dot, max3, to_local, to_world
 from ..scene.compile import borrowed
 from .emit import emitter_cdf, sample_emission
 from .records import (F_DELTA_DIR, F_DELTA_OUT, F_DELTA_POS, F_PHOTON, K_EMITTER, K_SURFACE, LightPaths,
                       allocate, concatenate)
-
-try:
-    from ..kernels.rng import LIGHT_KEY0
-except ImportError:        # the protocol commit adds it to kernels/rng.py; the same value
-    LIGHT_KEY0 = 1 << 40
 
 DIMS_START, DIMS_PER_BOUNCE = 5, 6
 D_LOBE, D_U1, D_U2, D_RR = 0, 1, 2, 3
@@ -238,7 +233,7 @@ class LightTracer:
     def __init__(self, sa, params: TraceParams, batch: int = 16384, threads=None):
         self.sa, self.params, self.threads = sa, params, threads
         self.cdf = emitter_cdf(sa)
-        self.batch = int(batch)
+        self.batch = max(1024, min(int(batch), (1 << 17) // (params.max_vertices + 1)))   # slots ~<= 20 MB
         self.per = params.max_vertices + 1
         self.slots = allocate(self.batch * self.per)
 
