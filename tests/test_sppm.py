@@ -51,7 +51,7 @@ def test_emission_seen_directly_and_through_specular_chains_is_exact():
     """effects=emission traces no photon (the plan bounds light paths to zero vertices) and adds the
     emitters the gather paths see: pt's emission image within 4 standard errors per channel sum."""
     sc = _scene("cornell-box.xml", 8)
-    f = render(make("sppm", sc, seed=3, photons_per_pass=2, effects=["emission"]), passes=300)
+    f = render(make("sppm", sc, seed=3, photons_per_pass=2, effects=["emission"]), passes=80)
     assert f.stats["photons_stored"] == 0
     g = render(make("pt", sc, seed=4, spp_per_pass=600, effects=["emission"]), spp=600)
     # the sum's standard error from the halves (independent pixels); 2 % more for pt's own noise
@@ -100,3 +100,15 @@ def test_bad_parameters_are_refused():
         make("sppm", sc, alpha=0.0)
     with pytest.raises(ValueError, match="radius"):
         make("sppm", sc, radius=-1.0)
+
+
+def test_sppm_converges_to_pt_through_glass_and_mirror():
+    """The caustics box (a glass and a mirror sphere): camera chains through specular vertices,
+    light paths refracting in and out of the glass. Measured at 16 x 16 after 20 passes: -0.28 %
+    against pt at 4096 spp (two pt seeds differ by 0.29 %); 1.5 % as on the Cornell box."""
+    sc = _scene("caustics-box.xml", 16)
+    g = render(make("pt", sc, seed=2, spp_per_pass=512, effects=NO_EMISSION), spp=2048)
+    f = render(make("sppm", sc, seed=1, photons_per_pass=100_000, effects=NO_EMISSION, radius_scale=0.25),
+               passes=20)
+    rel = f.primal.mean() / g.primal.mean() - 1
+    assert abs(rel) < 0.015, rel
