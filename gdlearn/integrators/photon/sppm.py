@@ -91,7 +91,10 @@ def _refuse(setup: SceneSetup) -> None:
 
 class SurfacePhotonMapper(PhotonPassIntegrator):
     """Shared by ``sppm`` and ``ppm``: ``make(name, scene, seed=0, photons_per_pass=100000,
-    alpha=0.7, radius=None, radius_scale=1.0, effects=None, max_depth=None, threads=None)``."""
+    alpha=0.7, radius=None, radius_scale=1.0, effects=None, max_depth=None, threads=None)``.
+
+    ``photons_per_pass`` light paths are emitted per pass, half for each half-buffer; a pass always
+    takes 2 camera samples per pixel (one gather point per half), whatever ``spp_per_pass`` says."""
 
     def __init__(self, scene, *, seed: int = 0, photons_per_pass: int = 100_000, alpha: float = 0.7,
                  radius=None, radius_scale: float = 1.0, effects=None, max_depth=None, threads=None,
