@@ -8,7 +8,8 @@ from gdlearn.integrators.photon.sppm import accumulate_density, ppm_radius2_fact
 
 
 def _tau_form(M, Phi, r0, alpha, n_emitted, rescale=True):
-    """Hachisuka et al. 2008, Eq. 10-12, written independently: tau is rescaled by R'^2 / R^2."""
+    """Hachisuka et al. 2008's updates (PHOTONS.md Sec. 1.4), written independently: tau is
+    rescaled by R'^2 / R^2."""
     N = np.zeros(M.shape[1:])
     R = np.full(M.shape[1:], r0)
     tau = np.zeros(M.shape[1:])
@@ -64,6 +65,6 @@ def test_radius_reduction_and_schedule():
     np.testing.assert_array_equal(r2, [1.0, 1.0])
     N, r2 = reduce_radius(np.array([0.0, 10.0]), np.array([1.0, 1.0]), np.array([10.0, 0.0]), 0.7)
     np.testing.assert_allclose(r2, [0.7, 1.0]) and np.testing.assert_allclose(N, [7.0, 10.0])
-    # Knaus & Zwicker 2011, Eq. 19
+    # Knaus & Zwicker 2011: r_{i+1}^2 = r_i^2 (i + alpha) / (i + 1)
     assert ppm_radius2_factor(0, 0.7) == 1.0
     assert math.isclose(ppm_radius2_factor(2, 0.7), (1.7 / 2) * (2.7 / 3))

@@ -8,7 +8,7 @@ two corrections importance transport needs:
   scale radiance by eta_ti^2 on refraction (Veach 1997, Sec. 5.2), so a light path multiplies the
   sampled weight back by ``bsdf_eta(wi, wo)^2``;
 * shading normals make the adjoint BSDF non-symmetric: the weight is multiplied by
-  ``|wi.ns| |wo.ng| / (|wi.ng| |wo.ns|)`` (Veach 1997, Sec. 5.3, Eq. 5.19; pbrt-v3
+  ``|wi.ns| |wo.ng| / (|wi.ng| |wo.ns|)`` (Veach 1997, Sec. 5.3.2; pbrt-v3
   ``CorrectShadingNormal``), exactly 1 on flat geometry.
 
 Russian roulette from light depth ``rr_depth`` survives with ``min(max(bsdf weight), 0.95)`` per

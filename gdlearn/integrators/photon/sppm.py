@@ -1,9 +1,9 @@
 """Stochastic progressive photon mapping (``sppm``) and its memoryless variant (``ppm``).
 
-``sppm`` -- Hachisuka & Jensen 2009 ("Stochastic Progressive Photon Mapping", Sec. 4, Eq. 6-8 with
-Hachisuka et al. 2008, Eq. 10-11): every pass traces fresh light paths and fresh gather points; each
-pixel keeps a photon count N, a radius R and the flux tau, and after a pass with M photons found
-inside R carrying Phi::
+``sppm`` -- Hachisuka & Jensen 2009 ("Stochastic Progressive Photon Mapping"), with the radius
+and flux updates of progressive photon mapping (Hachisuka et al. 2008; PHOTONS.md Sec. 1.4): every
+pass traces fresh light paths and fresh gather points; each pixel keeps a photon count N, a
+radius R and the flux tau, and after a pass with M photons found inside R carrying Phi::
 
     N' = N + alpha M,   R'^2 = R^2 (N + alpha M) / (N + M),   tau' = (tau + Phi) R'^2 / R^2,
 
@@ -14,13 +14,13 @@ accumulates ``Phi / (pi R_i^2)`` with the radius of the pass, and ``L = D / N_em
 number, without rescaling tau at every reduction (:func:`accumulate_density`,
 :func:`reduce_radius`; ``tests/test_sppm_statistics.py`` checks the two forms agree).
 
-``ppm`` -- Knaus & Zwicker 2011 ("Progressive Photon Mapping: A Probabilistic Approach", Sec. 4.3,
-Eq. 19): the radius is a global schedule, ``r_i^2 = r_1^2 prod_{k=1}^{i-1} (k + alpha) / (k + 1)``,
+``ppm`` -- Knaus & Zwicker 2011 ("Progressive Photon Mapping: A Probabilistic Approach"; PHOTONS.md
+Sec. 1.5): the radius is a global schedule, ``r_i^2 = r_1^2 prod_{k=1}^{i-1} (k + alpha) / (k + 1)``,
 each pass is an independent estimate at r_i, and the frame is the mean of the passes (no per-pixel
 state). The name says what it is: progressive photon mapping in the probabilistic, memoryless form.
 
 Both: surface scenes only (a scene with media is refused, naming the volumetric estimators to
-come); alpha 0.7 by default (Hachisuka et al. 2008, Sec. 4.3; Gruson et al. 2018); the initial
+come); alpha 0.7 by default (the reference code's and Gruson et al. 2018's; PHOTONS.md Appendix A); the initial
 radius is the pixel footprint at each pixel's gather point (PHOTONS.md Sec. 1.6), from camera paths
 of a sample index no pass uses (so the radius is independent of every estimate), times
 ``radius_scale`` -- or ``radius`` in scene units for every pixel. Each pass emits
@@ -61,14 +61,15 @@ def accumulate_density(D, phi, r2):
 
 
 def reduce_radius(N, r2, M, alpha):
-    """Hachisuka et al. 2008, Eq. 10-11: (N + alpha M, R^2 (N + alpha M) / (N + M)) per pixel."""
+    """Progressive radius reduction (Hachisuka et al. 2008; PHOTONS.md Sec. 1.4):
+    (N + alpha M, R^2 (N + alpha M) / (N + M)) per pixel."""
     tot = N + M
     ratio = np.where(tot > 0, (N + alpha * M) / np.where(tot > 0, tot, 1.0), 1.0)
     return N + alpha * M, r2 * ratio
 
 
 def ppm_radius2_factor(i: int, alpha: float) -> float:
-    """Knaus & Zwicker 2011, Eq. 19: r_{i+1}^2 / r_1^2 = prod_{k=1}^{i} (k + alpha) / (k + 1)."""
+    """Knaus & Zwicker 2011's global schedule: r_{i+1}^2 / r_1^2 = prod_{k=1}^{i} (k + alpha) / (k + 1)."""
     f = 1.0
     for k in range(1, i + 1):
         f *= (k + alpha) / (k + 1)
