@@ -25,7 +25,10 @@ radius is the pixel footprint at each pixel's gather point (PHOTONS.md Sec. 1.6)
 of a sample index no pass uses (so the radius is independent of every estimate), times
 ``radius_scale`` -- or ``radius`` in scene units for every pixel. Each pass emits
 ``photons_per_pass`` light paths in two independent halves (j < n and j >= n) gathered by two
-independent gather points per pixel at the same radius: ``Frame.halves``. The effects plan decides
+independent gather points per pixel at the same radius: ``Frame.halves``. In ``sppm`` the halves
+share N and R, driven by both halves' photon counts (PHOTONS.md Sec. 1.4: all fluxes of a gather
+point share R and N), so they are independent given the radius sequence only; in ``ppm`` the
+radius is a fixed schedule and the halves are fully independent. The effects plan decides
 what is traced (:class:`gdlearn.photons.trace.TraceParams`) and what is gathered
 (:class:`gather.GatherParams`).
 """
