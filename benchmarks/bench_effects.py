@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from gdlearn.integrators import make  # noqa: E402
-from gdlearn.integrators.pt import render_rows_path, render_rows_volpath  # noqa: E402
+from gdlearn.integrators.path.pt import render_rows_path, render_rows_volpath  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
 

@@ -6,7 +6,7 @@ gradient error at equal samples, relMSE at equal time.
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_gpt.py --res 32 --grad-spp 16 --seeds 24 \
         --et-seeds 3 --seconds 4 --repeat 5 --ref-spp 4096 --threads 1 --et-policies replay+reconnection \
         halfvector+replay+reconnection halfvector+reconnection halfvector+reconnection+manifold
-                                                                  # the run quoted in gdlearn.integrators.gpt
+                                                                  # the run quoted in gdlearn.integrators.path.gpt
 
 Scenes: ``cornell-box``, ``caustics-box``, ``fog-box``, ``mesh`` and ``caustic-closeup`` (manifold
 exploration's scene) by default. A scene that ``make("gpt", scene)`` refuses is reported with the
@@ -47,7 +47,7 @@ from gdlearn.experiments.gradients import gradient_errors, shift_summary, summar
 from gdlearn.experiments.references import render_reference
 from gdlearn.experiments.study import Method
 from gdlearn.integrators import make
-from gdlearn.integrators.gpt import MANIFOLD_POLICY, SUPPORTED
+from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, SUPPORTED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ACTIONS = ("replay", "halfvector", "reconnection", "manifold", "fail")

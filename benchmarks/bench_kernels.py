@@ -15,9 +15,9 @@ import time
 import numpy as np
 from numba import njit
 
-from gdlearn.kernels import bsdf as B
-from gdlearn.kernels import medium as M
-from gdlearn.kernels import phase as P
+from gdlearn.kernels.bsdf.dispatch import dispatch as B
+from gdlearn.kernels.media import medium as M
+from gdlearn.kernels.media import phase as P
 from gdlearn.scene.model import BSDF, rgb
 
 CASES = [

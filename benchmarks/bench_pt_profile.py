@@ -25,10 +25,10 @@ import numpy as np  # noqa: E402
 from numba import njit, prange  # noqa: E402
 
 from gdlearn.integrators import make  # noqa: E402
-from gdlearn.integrators.pt import _rows_path  # noqa: E402
-from gdlearn.kernels.bvh import STACK_SIZE, closest_hit  # noqa: E402
+from gdlearn.integrators.path.pt import _rows_path  # noqa: E402
+from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit  # noqa: E402
 from gdlearn.kernels.camera import camera_ray  # noqa: E402
-from gdlearn.scene.compile import borrowed  # noqa: E402
+from gdlearn.kernels.arrays import borrowed  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
 

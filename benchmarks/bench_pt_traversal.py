@@ -27,13 +27,14 @@ from numba import njit  # noqa: E402
 
 from gdlearn.kernels import bvh_build  # noqa: E402
 from gdlearn.kernels import packet_trace as PT  # noqa: E402
-from gdlearn.kernels.bvh import STACK_SIZE, any_hit_inline, closest_hit_inline  # noqa: E402
+from gdlearn.kernels.accel.bvh import STACK_SIZE, any_hit_inline, closest_hit_inline  # noqa: E402
 from gdlearn.kernels.camera import camera_ray  # noqa: E402
 from gdlearn.kernels.geometry import offset_origin, surface  # noqa: E402
 from gdlearn.kernels.lights import sample_emitter  # noqa: E402
 from gdlearn.kernels.scene_query import shadow_ray  # noqa: E402
 from gdlearn.kernels.vec import coordinate_system, to_world  # noqa: E402
-from gdlearn.scene.compile import borrowed, compile_scene  # noqa: E402
+from gdlearn.kernels.arrays import borrowed
+from gdlearn.scene.compile import compile_scene  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
 RO = PT.N_S_TRACE          # the benchmark's ray set sits after the traversal's own rows

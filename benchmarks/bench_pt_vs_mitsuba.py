@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from gdlearn.refs.mitsuba import import_mitsuba, load_mitsuba, set_threads, variant_works  # noqa: E402
+from gdlearn.crosscheck.mitsuba import import_mitsuba, load_mitsuba, set_threads, variant_works  # noqa: E402
 
 
 def parse_args(argv=None):

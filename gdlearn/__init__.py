@@ -37,7 +37,7 @@ def _use_source_keyed_numba_cache() -> None:
     """Point numba's on-disk cache at a folder named by a hash of gdlearn's sources.
 
     Numba re-validates a cached kernel only against the timestamp of the file that *defines* it, not
-    of the files whose functions it inlines or calls: after an edit of ``kernels/bsdf.py`` a cached
+    of the files whose functions it inlines or calls: after an edit of ``kernels/bsdf/dispatch.py`` a cached
     path tracer would silently keep the old BSDF. Keying the whole cache by the package's source makes
     any edit start from a clean cache. ``NUMBA_CACHE_DIR`` set by the user wins.
     """

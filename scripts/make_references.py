@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Render the Mitsuba 3 reference images the cross-check tests compare gdlearn against.
 
-For every case of :func:`gdlearn.refs.store.reference_cases` (each shipped ``scenes/*.xml`` and
+For every case of :func:`gdlearn.crosscheck.store.reference_cases` (each shipped ``scenes/*.xml`` and
 ``scenes/test/*.xml`` with its own settings, plus the ``max_depth = 2`` cases that gdlearn's
 ``--effects direct`` must equal) this renders the scene with Mitsuba 3 at 32 x 32 pixels with K
 independent seeds and stores the mean image and its per-pixel standard error in
@@ -29,8 +29,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # run from a clone without installing
 
-from gdlearn.refs import store  # noqa: E402
-from gdlearn.refs.mitsuba import import_mitsuba, mitsuba_mean_stderr, variant_works  # noqa: E402
+from gdlearn.crosscheck import store  # noqa: E402
+from gdlearn.crosscheck.mitsuba import import_mitsuba, mitsuba_mean_stderr, variant_works  # noqa: E402
 
 
 def parse_args(argv=None):

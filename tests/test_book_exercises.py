@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from gdlearn.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
+from gdlearn.teaching.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
 
 ROOT = Path(__file__).resolve().parent.parent
 EXERCISES = list_exercises()
@@ -27,12 +27,12 @@ def _env(**extra):
 
 
 def _check(name: str, solution: bool, exercises_dir: Path | None = None):
-    """Run gdlearn.exercises.check in a child; return (exit status, printed report)."""
+    """Run gdlearn.teaching.exercises.check in a child; return (exit status, printed report)."""
     patch = ""
     if exercises_dir is not None:
         patch = (f"e.EXERCISES_DIR = pathlib.Path({str(exercises_dir)!r}); "
                  f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; ")
-    code = ("import pathlib, sys; import gdlearn.exercises as e; " + patch +
+    code = ("import pathlib, sys; import gdlearn.teaching.exercises as e; " + patch +
             f"r = e.check({name!r}, solution={solution}); print(r.text()); sys.exit(0 if r.ok else 1)")
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(), capture_output=True,
                          text=True, timeout=300)
@@ -60,12 +60,35 @@ def test_solution_passes_its_exercise_tests(name):
     assert res.returncode == 0, f"the solution of {name} fails its tests:\n{res.stdout[-3000:]}"
 
 
+def _pristine_stub(name: str) -> str:
+    """The stub as the repository ships it: from git's HEAD, so that a student who solves an
+    exercise in place (as its README says) does not turn this test red; the working copy only when
+    git cannot tell (no repository, or a stub not committed yet)."""
+    rel = f"exercises/{name}/{module_name(name)}.py"
+    res = subprocess.run(["git", "show", f"HEAD:{rel}"], cwd=ROOT, capture_output=True, text=True)
+    return res.stdout if res.returncode == 0 else (ROOT / rel).read_text()
+
+
 @pytest.mark.parametrize("name", EXERCISES)
-def test_stub_fails_with_readable_feedback(name):
-    rc, out = _check(name, solution=False)
+def test_stub_fails_with_readable_feedback(name, tmp_path):
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / name, work / name)
+    (work / name / f"{module_name(name)}.py").write_text(_pristine_stub(name))
+    rc, out = _check(name, solution=False, exercises_dir=work)
     assert rc == 1, f"the untouched stub of {name} should fail its checks:\n{out}"
     assert "FAIL" in out and "checks passed" in out, out
     assert "Traceback" not in out, f"feedback must not be a traceback wall:\n{out}"
+
+
+def test_a_solved_stub_passes_in_place(tmp_path):
+    """A student solves the exercise in its own folder: `gdlearn check` then passes, and the stub
+    test above (which reads the pristine stub) is unaffected."""
+    name = "mis-weights"
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / name, work / name)
+    shutil.copy(SOLUTIONS_DIR / f"{module_name(name)}.py", work / name / f"{module_name(name)}.py")
+    rc, out = _check(name, solution=False, exercises_dir=work)
+    assert rc == 0 and "Well done" in out, out
 
 
 def test_wrong_distribution_is_caught(tmp_path):

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gdlearn import quick, widgets
+from gdlearn.teaching import quick, widgets
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -37,7 +37,7 @@ def test_captions_say_the_budget_and_quick_mode(monkeypatch):
 
 # -- widgets ---------------------------------------------------------------------------------------
 def test_glued_sentences_show_without_quotes():
-    from gdlearn.quick import Sentence
+    from gdlearn.teaching.quick import Sentence
     # {glue:text} prints the repr: a str would show as 'text' with its quotes
     assert repr(Sentence("replay wins")) == "replay wins"
     assert repr("replay wins") != "replay wins"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gdlearn.kernels import geometry as g
-from gdlearn.kernels.bvh import STACK_SIZE, any_hit, build_scene, closest_hit
+from gdlearn.kernels.accel.bvh import STACK_SIZE, any_hit, build_scene, closest_hit
 from gdlearn.scene.compile import _bounds
 from gdlearn.kernels.layout import MAT_WIDTH
 
@@ -117,7 +117,7 @@ def test_quads_hit_the_triangle_that_contains_the_point():
 
 
 def test_quad_pairs_are_detected_only_for_parallelograms():
-    from gdlearn.kernels.bvh_build import _quad
+    from gdlearn.kernels.accel.bvh_build import _quad
     p0, a, b = np.zeros(3), np.array([1.0, 0, 0]), np.array([0.3, 1.0, 0])
     tri = lambda e1, e2: np.concatenate([p0, e1, e2, np.zeros(g.PRIM_WIDTH - 9)])     # noqa: E731
     assert _quad(tri(a, a + b), tri(a + b, b)) is not None          # (p0 p1 p2), (p0 p2 p3)

@@ -15,8 +15,8 @@ import pytest
 
 from gdlearn.integrators import make, render
 from gdlearn.kernels import layout as L
-from gdlearn.kernels.bsdf import ROUGHPLASTIC_WIDTH, material_row, nee_class_share, nee_classes, vertex_class
-from gdlearn.kernels.bsdf_plastic import roughplastic_coat_fraction, roughplastic_sample, roughplastic_spec_prob
+from gdlearn.kernels.bsdf.dispatch import ROUGHPLASTIC_WIDTH, material_row, nee_class_share, nee_classes, vertex_class
+from gdlearn.kernels.bsdf.plastic import roughplastic_coat_fraction, roughplastic_sample, roughplastic_spec_prob
 from gdlearn.scene.load import load
 from gdlearn.scene.model import BSDF, rgb
 

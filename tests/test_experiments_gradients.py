@@ -7,7 +7,7 @@ from gdlearn.experiments import Method
 from gdlearn.experiments.gradients import (finite_differences, gradient_errors, gradient_relmse,
                                            gradient_relmse_maps, shift_summary, summarize)
 from gdlearn.experiments.metrics import RELMSE_EPS
-from gdlearn.experiments.toy import ToyGradient, ToyPrimal, ToyScene
+from gdlearn.teaching.toy import ToyGradient, ToyPrimal, ToyScene
 
 
 def test_gradient_relmse_hand_computed():

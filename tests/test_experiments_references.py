@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from gdlearn.experiments import references as R
-from gdlearn.experiments.toy import ToyScene
+from gdlearn.teaching.toy import ToyScene
 
 
 def test_key_follows_scene_content(tmp_path):
@@ -21,7 +21,7 @@ def test_key_follows_scene_content(tmp_path):
 def test_render_reference_is_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
     sc = ToyScene(10, 6)
-    est = "gdlearn.experiments.toy:ToyPrimal"
+    est = "gdlearn.teaching.toy:ToyPrimal"
     a = R.render_reference(sc, est, spp=64, spp_per_pass=8)
     assert a.spp == 64 and a.variance is not None and np.isfinite(a.floor) and a.floor > 0
     files = list((tmp_path / "references").glob("*.npz"))

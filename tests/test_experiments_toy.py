@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from gdlearn.experiments.toy import ToyGradient, ToyPrimal, ToyScene
+from gdlearn.teaching.toy import ToyGradient, ToyPrimal, ToyScene
 from gdlearn.integrators.base import render
 
 

@@ -1,4 +1,4 @@
-"""The figure helpers of the chapter "Shift mappings" (gdlearn.figures.shifts, shift_checks): the
+"""The figure helpers of the chapter "Shift mappings" (gdlearn.teaching.figures.shifts, shift_checks): the
 section scene's ray casting by hand, base paths that obey the specular laws, offset paths that are
 what the policies say (shared vertices after a reconnection, copied half vectors, manifold chains
 that obey Snell's law and end on the base's light vertex), zero failures for a zero shift, and the
@@ -8,9 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from gdlearn.figures import shift_checks as C
-from gdlearn.figures import shifts as S
-
+from gdlearn.teaching.figures import shift_checks as C
+from gdlearn.teaching.figures import shifts as S
 GLASS, MIRROR = S.Section("glass"), S.Section("mirror")
 
 

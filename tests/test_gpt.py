@@ -22,7 +22,7 @@ import pytest
 from scipy import stats
 
 from gdlearn.integrators import make, render
-from gdlearn.kernels.gpt_shift import BROKEN_HV_JACOBIAN, BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_UNPAIRED
+from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_HV_JACOBIAN, BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_UNPAIRED
 from gdlearn.scene.load import load
 
 ROOT = __file__.rsplit("/tests/", 1)[0]
@@ -234,8 +234,8 @@ def test_bad_options_are_clear_errors():
 
 def test_media_dispatch_to_the_volume_kernel():
     """Scenes with media run gpt_volume_rows (same signature and out contract), imported lazily."""
-    from gdlearn.kernels.gpt_volume import gpt_volume_rows
-    from gdlearn.integrators.gpt import gpt_rows
+    from gdlearn.integrators.path.gpt_volume.lockstep import gpt_volume_rows
+    from gdlearn.integrators.path.gpt import gpt_rows
     assert make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES)).kernel is gpt_volume_rows
     assert make("gpt", _scene("cornell-box")).kernel is gpt_rows
 
@@ -245,7 +245,7 @@ def test_default_policy_follows_the_effects_plan():
     scene has analytic specular shapes, no media), halfvector+reconnection elsewhere; the CLI offers
     every supported policy."""
     from gdlearn.commands.render import SHIFT_CHOICES
-    from gdlearn.integrators.gpt import DEFAULT_POLICY, MANIFOLD_POLICY, SUPPORTED
+    from gdlearn.integrators.path.gpt import DEFAULT_POLICY, MANIFOLD_POLICY, SUPPORTED
     assert SHIFT_CHOICES == SUPPORTED and MANIFOLD_POLICY in SUPPORTED
     caustics = _scene("caustics-box")
     g = make("gpt", caustics)

@@ -25,7 +25,7 @@ from test_gpt import (FAMILY_ALPHA, N_SEEDS, OMNIBUS_MAX, ROOT, _frames, _pilot,
                       differences, omnibus)
 
 from gdlearn.integrators import make, render  # noqa: E402
-from gdlearn.kernels.gpt_shift import BROKEN_MANIFOLD_JACOBIAN  # noqa: E402
+from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_MANIFOLD_JACOBIAN  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
 POLICY = "halfvector+reconnection+manifold"

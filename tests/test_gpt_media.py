@@ -1,4 +1,4 @@
-"""Volumetric G-PT (gdlearn.kernels.gpt_volume: volpath base path, distance copy, Eq. 17 MIS):
+"""Volumetric G-PT (gdlearn.integrators.path.gpt_volume.lockstep: volpath base path, distance copy, Eq. 17 MIS):
 unbiased gradients per policy on the fog box, the base radiance is pt's, broken variants fail, hard
 media stay finite.
 
@@ -17,11 +17,12 @@ import pytest
 from scipy import stats
 
 from gdlearn.integrators import make, render
-from gdlearn.kernels.gpt_shift import BROKEN_MIS, BROKEN_PRIMAL
-from gdlearn.kernels.gpt_volume import gpt_volume_rows
+from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_MIS, BROKEN_PRIMAL
+from gdlearn.integrators.path.gpt_volume.lockstep import gpt_volume_rows
+from gdlearn.integrators.path.params import GptParams
 from gdlearn.scene.load import load
 from gdlearn.shifts.policy import N_STATS, policy_code, stats_dict
-from gdlearn.shifts.replay import combine_gradients
+from gdlearn.integrators.gradients import combine_gradients
 
 ROOT = __file__.rsplit("/tests/", 1)[0]
 RES = 12
@@ -59,8 +60,8 @@ def trace(integ, seed, spp, policy, broken=0, sample0=0):
     out = np.zeros((9, h, w, 3))
     st = np.zeros((h, N_STATS), dtype=np.int64)
     bad = np.zeros(h, dtype=np.int64)
-    gpt_volume_rows(integ.setup.sa, seed, sample0, spp, policy_code(policy), integ.setup.max_depth, integ.setup.rr_depth, integ.setup.mask,
-                    integ.setup.threshold, broken, out, st, bad)
+    gpt_volume_rows(integ.setup.sa, seed, sample0, spp, GptParams.of(integ.setup, policy_code(policy), broken), out, st,
+                    bad)
     return out, stats_dict(st.sum(axis=0)), int(bad.sum())
 
 
@@ -160,9 +161,9 @@ def test_effects_restricted_gradients_are_unbiased(effects):
 
 #: a denser, chromatic fog (sigma_t per channel): spectral MIS makes T / P(pass) differ from 1 and
 #: the transmittance ratios of base and offset flights matter (grey sigma 0.2 hides them: T / P = 1).
-#: (gpt_volume_vertex.BROKEN_TRANSMITTANCE, the offset flight given the base's weight, is NOT caught
-#: at this budget -- measured max block |t| 2.4-3.8 vs k = 5.15, mean t^2 1.1-1.5 -- so no test
-#: claims it; the weight-1 MIS variant below is caught.)
+#: (A variant that gives the offset flight the base's weight is not caught at this budget -- measured
+#: max block |t| 2.4-3.8 vs k = 5.15 -- so the kernels no longer carry it; the weight-1 MIS variant
+#: below is caught.)
 CHROMATIC = (0.4, 1.0, 2.0)
 
 

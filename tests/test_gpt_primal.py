@@ -16,8 +16,8 @@ import pytest
 from scipy import stats
 
 from gdlearn.integrators import make, render
-from gdlearn.integrators.gpt import mis_primal
-from gdlearn.kernels.gpt_shift import BROKEN_PRIMAL
+from gdlearn.integrators.gradients import mis_primal
+from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_PRIMAL
 from gdlearn.scene.load import load
 
 ROOT = __file__.rsplit("/tests/", 1)[0]

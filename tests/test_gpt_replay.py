@@ -182,7 +182,8 @@ def test_russian_roulette_skips_shifts(cornell):
 def test_combine_gradients_never_wraps_around_the_border():
     """Algorithm 1's backward writes G[x-1] at x = 0 would wrap to the last column in array code;
     here the backward shift of pixel 0 (which leaves the image) must not reach any gradient."""
-    from gdlearn.shifts.replay import DOWN, LEFT, RIGHT, UP, combine_gradients
+    from gdlearn.integrators.gradients import combine_gradients
+    from gdlearn.shifts.replay import DOWN, LEFT, RIGHT, UP
     h, w = 4, 5
     diffs = np.zeros((4, h, w))
     diffs[RIGHT] = 1.0               # forward: I[x+1] - I[x] = 1

@@ -67,7 +67,7 @@ WRONG = {
 
 
 def _check(folder: Path) -> tuple[int, str]:
-    code = (f"import pathlib, sys; import gdlearn.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(folder)!r}); "
+    code = (f"import pathlib, sys; import gdlearn.teaching.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(folder)!r}); "
             "e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; r = e.check('replay'); print(r.text()); "
             "sys.exit(0 if r.ok else 1)")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))

@@ -24,18 +24,19 @@ import pytest
 from numba import njit
 
 from gdlearn.integrators import make
-from gdlearn.kernels.bsdf import bsdf_sample, lobe_class, sampled_lobe_class
-from gdlearn.kernels.bvh import STACK_SIZE
+from gdlearn.integrators.path.params import GptParams
+from gdlearn.kernels.bsdf.dispatch import bsdf_sample, lobe_class, sampled_lobe_class
+from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.gpt_mixed import shift_segment_mixed
-from gdlearn.kernels.gpt_path import _shift_segment, _start_offsets, cls_next_of
-from gdlearn.kernels.gpt_shift import (ALIVE, BROKEN_LOBE_CLASS, BROKEN_REVERSIBILITY, F_NG, F_NS, F_POS,
+from gdlearn.integrators.path.gpt_surface.mixed import shift_segment_mixed
+from gdlearn.integrators.path.gpt_surface.lockstep import _shift_segment, _start_offsets, cls_next_of
+from gdlearn.integrators.path.gpt_surface.vertex import (ALIVE, BROKEN_LOBE_CLASS, BROKEN_REVERSIBILITY, F_NG, F_NS, F_POS,
                                        F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                        JOINED, NF, NI, get3)
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.scene_query import intersect
-from gdlearn.kernels.surface_path import D_BSDF_U1, D_BSDF_U2, D_LOBE, dim
+from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_LOBE, dim
 from gdlearn.kernels.vec import coordinate_system, to_local, to_world
 from gdlearn.scene.load import load
 from gdlearn.shifts.policy import N_STATS, is_mixed, policy_code
@@ -92,10 +93,12 @@ def _store(of, oi, k, j, out, iout):
 
 
 @njit(cache=True)
-def _shift(sa, policy, fx, fy, x, w, h, k, n, rec, irec, threshold, broken, out, iout, stack):
+def _shift(sa, cfg, fx, fy, x, w, h, k, n, rec, irec, out, iout, stack):
     """Shift the recorded base path (n vertices) to neighbour k with gpt's steps and record the offset
     path in out / iout like the base (its random numbers: the base's). Returns ``(m, joined_at,
-    failed)``: m vertices recorded, the step whose reconnection joined the base (-1: none)."""
+    failed)``: m vertices recorded, the step whose reconnection joined the base (-1: none). ``cfg``: the
+    kernels' :class:`~gdlearn.integrators.path.params.GptParams`."""
+    policy, threshold = cfg.policy, cfg.threshold
     of = np.zeros((4, NF))
     oi = np.zeros((4, NI), dtype=np.int64)
     stats = np.zeros(N_STATS, dtype=np.int64)
@@ -118,11 +121,11 @@ def _shift(sa, policy, fx, fy, x, w, h, k, n, rec, irec, threshold, broken, out,
         cls, delta, pdf = int(rec[j, R_CLS]), rec[j, R_DELTA] > 0.5, rec[j, R_PDF]
         if is_mixed(policy):
             ns = (rec[j, 6], rec[j, 7], rec[j, 8])
-            shift_segment_mixed(sa, k, of, oi, policy, cls, mat_b, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2,
-                                p2, ng2, ns2, threshold, broken, stats, stack)
+            shift_segment_mixed(sa, k, of, oi, cfg, cls, mat_b, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2,
+                                p2, ng2, ns2, stats, stack)
         else:
-            _shift_segment(sa, k, of, oi, policy, cls, cls_next_of(sa, hit2, prim2, threshold), p, wi, wo, pdf,
-                           delta, us, hit2, prim2, p2, ng2, ns2, d2, threshold, broken, stats, stack)
+            _shift_segment(sa, k, of, oi, cfg, cls, cls_next_of(sa, hit2, prim2, cfg), p, wi, wo, pdf,
+                           delta, us, hit2, prim2, p2, ng2, ns2, d2, stats, stack)
         if oi[k, I_ALIVE] != ALIVE:
             return j, -1, True
         # the offset's segment leaving its vertex j: directions in its own frame, density, lobe kind
@@ -176,12 +179,12 @@ def check(scene_name, policy, broken=0, res=16, spp=16, seed=5):
             for s in range(spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
                 n = _trace_base(sa, fx, fy, seed, key, s, MAXV, th, broken, rec, irec, stack)
-                m, joined, failed = _shift(sa, code, fx, fy, x, w, h, 0, n, rec, irec, th, broken, off, ioff, stack)
+                m, joined, failed = _shift(sa, GptParams(code, 0, 0, 0, th, broken), fx, fy, x, w, h, 0, n, rec, irec, off, ioff, stack)
                 if failed:
                     c["failed_forward"] += 1
                     continue
                 ox, oy = offset_film_position(fx, fy, 0)
-                mb, joined_b, failed_b = _shift(sa, code, ox, oy, x + 1, w, h, 1, m, off, ioff, th, 0, back, iback,
+                mb, joined_b, failed_b = _shift(sa, GptParams(code, 0, 0, 0, th, 0), ox, oy, x + 1, w, h, 1, m, off, ioff, back, iback,
                                                 stack)
                 c["checked"] += 1
                 c["joined"] += joined >= 0

@@ -1,4 +1,4 @@
-"""BSDF kernels (gdlearn.kernels.bsdf): chi^2 goodness of fit of every sampler against its own pdf
+"""BSDF kernels (gdlearn.kernels.bsdf.dispatch): chi^2 goodness of fit of every sampler against its own pdf
 integrated numerically, sample/eval/pdf consistency, normalisation, white-furnace energy bounds,
 delta lobes against textbook Fresnel / Snell, vertex classes and numerical stability."""
 import math
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from numba import njit
 
-from gdlearn.kernels import bsdf as B
+from gdlearn.kernels.bsdf.dispatch import dispatch as B
 from gdlearn.kernels import layout as L
-from gdlearn.kernels.bsdf_plastic import ROUGHPLASTIC_WIDTH
+from gdlearn.kernels.bsdf.plastic import ROUGHPLASTIC_WIDTH
 from gdlearn.scene.model import BSDF, rgb
 from test_kernels_helpers import chi2_pvalue, sphere_bins, sphere_grid
 

@@ -4,8 +4,8 @@ import zlib
 import numpy as np
 import pytest
 
-from gdlearn.kernels import bsdf as B
-from gdlearn.kernels.bsdf_plastic import ROUGHPLASTIC_WIDTH
+from gdlearn.kernels.bsdf.dispatch import dispatch as B
+from gdlearn.kernels.bsdf.plastic import ROUGHPLASTIC_WIDTH
 from gdlearn.scene.model import BSDF, rgb
 
 mi = pytest.importorskip("mitsuba")

@@ -1,4 +1,4 @@
-"""Homogeneous-medium kernels (gdlearn.kernels.medium): distance sampling against the exponential
+"""Homogeneous-medium kernels (gdlearn.kernels.media.medium): distance sampling against the exponential
 distribution (chi^2), unbiasedness of the spectral-MIS estimator against closed-form integrals, and
 stability for thin (sigma t ~ 1e-8) and dense (sigma = 1e4) media."""
 import math
@@ -8,7 +8,7 @@ import pytest
 from numba import njit
 from scipy import stats
 
-from gdlearn.kernels import medium as M
+from gdlearn.kernels.media import medium as M
 from test_kernels_helpers import chi2_pvalue
 
 N = 100_000

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy import integrate, special
 
-from gdlearn.kernels import fresnel as FR
-from gdlearn.kernels import microfacet as MF
+from gdlearn.kernels.bsdf.dispatch import fresnel as FR
+from gdlearn.kernels.bsdf.dispatch import microfacet as MF
 from gdlearn.kernels.layout import BECKMANN, GGX
 
 

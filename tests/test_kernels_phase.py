@@ -1,4 +1,4 @@
-"""Henyey-Greenstein phase function (gdlearn.kernels.phase): chi^2 of the sampler against the analytic
+"""Henyey-Greenstein phase function (gdlearn.kernels.media.phase): chi^2 of the sampler against the analytic
 HG CDF, the density against the textbook formula and against Mitsuba 3, and stability at |g| -> 1."""
 import math
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from gdlearn.kernels import phase as P
+from gdlearn.kernels.media import phase as P
 from test_kernels_helpers import chi2_pvalue
 
 N = 100_000

@@ -2,7 +2,7 @@
 
 The Mitsuba references are cached in ``tests/references/`` (``scripts/make_references.py``: 32 x 32
 pixels, 8 independent seeds x 1024 spp, mean and per-pixel standard error). gdlearn renders the same
-scene file at the same resolution with 4 independent seeds; :func:`gdlearn.refs.compare.compare`
+scene file at the same resolution with 4 independent seeds; :func:`gdlearn.crosscheck.compare.compare`
 then requires, for 4 x 4-pixel blocks and each channel,
 
     |z| = |m_gdlearn - m_mitsuba| / sqrt(se_gdlearn^2 + se_mitsuba^2) < t.isf(alpha / (2 m), dof)
@@ -24,8 +24,8 @@ import importlib.util
 import numpy as np
 import pytest
 
-from gdlearn.refs import store
-from gdlearn.refs.compare import ImageStats, compare
+from gdlearn.crosscheck import store
+from gdlearn.crosscheck.compare import ImageStats, compare
 
 HAVE_MITSUBA = importlib.util.find_spec("mitsuba") is not None
 needs_mitsuba = pytest.mark.skipif(
@@ -156,7 +156,7 @@ _mi_cache: dict = {}
 
 
 def _mitsuba_standin(name: str, variant: str = "scalar_rgb", **extra) -> ImageStats:
-    from gdlearn.refs.mitsuba import render_mitsuba
+    from gdlearn.crosscheck.mitsuba import render_mitsuba
 
     case = CASES[name]
     key = (name, variant, tuple(sorted(extra.items())))
@@ -198,7 +198,7 @@ def test_harness_rejects_brighter_light_in_scene():
     """A 5 % brighter emitter set in Mitsuba's scene itself (not by scaling pixels) is rejected."""
     import mitsuba as mi
 
-    from gdlearn.refs.mitsuba import set_threads
+    from gdlearn.crosscheck.mitsuba import set_threads
 
     mi.set_variant("scalar_rgb")
     set_threads(2)
@@ -228,7 +228,7 @@ def test_harness_rejects_missing_indirect_light():
 @pytest.mark.mitsuba
 def test_llvm_variant_matches_scalar_reference():
     """Mitsuba's two back-ends agree within the calibrated tolerance (skips without libLLVM >= 16)."""
-    from gdlearn.refs.mitsuba import variant_works
+    from gdlearn.crosscheck.mitsuba import variant_works
 
     ok, why = variant_works("llvm_ad_rgb")
     if not ok:

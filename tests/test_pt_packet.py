@@ -1,4 +1,4 @@
-"""The packet path tracer (gdlearn.kernels.surface_packet) renders the one-path-at-a-time kernel's
+"""The packet path tracer (gdlearn.integrators.path.packet) renders the one-path-at-a-time kernel's
 image bit for bit, for every scene it accepts, and refuses the others.
 
 Exact comparisons: a lane runs radiance_path's bounce with the same functions and random numbers,

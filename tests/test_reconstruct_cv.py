@@ -235,7 +235,7 @@ def test_primal_variance_pool_does_not_spread_a_light_across_its_rim():
     below fail if the primal pool goes back to the mean or the weights stop working (checked on
     seeds 0-1)."""
     from gdlearn.experiments.metrics import relmse
-    from gdlearn.experiments.toy import ToyGradient, ToyScene
+    from gdlearn.teaching.toy import ToyGradient, ToyScene
     from gdlearn.reconstruct.conventions import pool_variance
     scene = ToyScene(96, 64)
     truth = scene.truth()

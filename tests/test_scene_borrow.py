@@ -1,14 +1,15 @@
-"""scene.compile.borrowed / scene_query.borrow: the same arrays without reference counts.
+"""kernels.arrays.borrowed / borrow: the same arrays without reference counts.
 
 The path tracer's parallel loop runs on borrowed scene arrays; they must be the very same memory
 (shape, strides, values) as the owned ones, and the rendered image must not change."""
 import numpy as np
 from numba import njit
 
-from gdlearn.integrators.pt import _rows_path, render_rows_path
+from gdlearn.integrators.path.pt import _rows_path, render_rows_path
 from gdlearn.kernels.pathclass import ALL_MASK
-from gdlearn.kernels.scene_query import borrow
-from gdlearn.scene.compile import borrowed, compile_scene
+from gdlearn.kernels.arrays import borrow
+from gdlearn.kernels.arrays import borrowed
+from gdlearn.scene.compile import compile_scene
 from gdlearn.scene.load import load
 
 

@@ -81,7 +81,7 @@ CASES = ([("reconnection-jacobian", "solution", (EX / "_solutions" / "reconnecti
 
 
 def _check(folder: Path, name: str) -> tuple[int, str]:
-    code = (f"import pathlib, sys; import gdlearn.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(folder)!r}); "
+    code = (f"import pathlib, sys; import gdlearn.teaching.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(folder)!r}); "
             f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; r = e.check({name!r}); print(r.text()); "
             "sys.exit(0 if r.ok else 1)")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))

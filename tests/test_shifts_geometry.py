@@ -7,29 +7,12 @@ is recomputed by ray tracing these surfaces, and the offset's coordinate is read
 offset point. Every chart used here has an orthonormal derivative at the point of expansion, so the
 determinant of the 2x2 finite-difference matrix is the Jacobian in the area / solid-angle measure.
 
-Fourth-order central differences, f' ~ [-f(2h) + 8 f(h) - 8 f(-h) + f(-2h)] / 12h: error
-~ h^4 |f^(5)| / 30 + eps |f| / h. With h = 1e-6 on O(1) geometry that is ~1e-25 |f^(5)| + 1e-10.
-Near-grazing hits on a sphere are the hard case: the hit point depends on the direction like a
-square root near tangency, so |f^(5)| grows like cos^-9 (measured: h = 1e-4 misses by 1e-5 at
-cos ~ 0.03, h = 1e-6 and 1e-7 agree to 1e-9). So the shift tests ask for 1e-6 relative agreement
-and still fail on any wrong cosine or distance factor (an O(1) error).
+The harness (charts, fourth-order central differences, step and error analysis) is
+:mod:`gdlearn.testing.fdjac`, shared with the exercises' checks and the book's figures.
 """
 import numpy as np
 
-H = 1e-6
-
-
-def unit(v):
-    v = np.asarray(v, float)
-    return v / np.linalg.norm(v)
-
-
-def tangent_frame(n):
-    """Orthonormal (e1, e2) completing the unit vector n (any continuous choice works for charts)."""
-    n = unit(n)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = unit(np.cross(n, a))
-    return e1, np.cross(n, e1)
+from gdlearn.testing.fdjac import H, direction_chart, fd_jacobian_at_point as fd_jacobian, tangent_frame, unit  # noqa: E402,F401
 
 
 class Plane:
@@ -81,30 +64,6 @@ class Sphere:
 def trace(surface, o, d):
     t = surface.intersect(np.asarray(o, float), unit(d))
     return None if np.isnan(t) else np.asarray(o, float) + t * unit(d)
-
-
-def direction_chart(w0, u, v):
-    """Chart of the unit sphere at w0 (gnomonic projection; derivative at 0 is orthonormal)."""
-    e1, e2 = tangent_frame(w0)
-    return unit(w0 + u * e1 + v * e2)
-
-
-def fd_jacobian(f, h=H):
-    """|det| of the 2x2 derivative of f: (u, v) -> 3-vector, read in an orthonormal basis of the
-    plane orthogonal to ``normal_out`` at f(0, 0). f returns (point, normal_out) or None."""
-    f0 = f(0.0, 0.0)
-    if f0 is None:
-        return None
-    _, n_out = f0
-    e1, e2 = tangent_frame(n_out)
-    cols = []
-    for du, dv in ((h, 0.0), (0.0, h)):
-        pts = [f(k * du, k * dv) for k in (2, 1, -1, -2)]
-        if any(p is None for p in pts):
-            return None
-        d = (-pts[0][0] + 8 * pts[1][0] - 8 * pts[2][0] + pts[3][0]) / (12 * h)
-        cols.append([np.dot(d, e1), np.dot(d, e2)])
-    return abs(np.linalg.det(np.array(cols).T))
 
 
 # --- tests of the helpers themselves -------------------------------------------------------------

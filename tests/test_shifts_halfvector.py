@@ -11,7 +11,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from test_shifts_geometry import Plane, Sphere, direction_chart, fd_jacobian, trace, unit  # noqa: E402
 
 from gdlearn.kernels import layout as L  # noqa: E402
-from gdlearn.kernels.bsdf import material_row  # noqa: E402
+from gdlearn.kernels.bsdf.dispatch import material_row  # noqa: E402
 from gdlearn.shifts.halfvector import (half_vector, halfvector_copy, halfvector_copy_mat,  # noqa: E402
                                        halfvector_copy_world)
 from gdlearn.shifts.path import jacobian_solid_angle_to_area  # noqa: E402
@@ -22,7 +22,7 @@ ETAS = (1.5, 1.0 / 1.33, 2.4)
 
 def _scatter(wi, h, eta, refract):
     """Reference reflection / refraction of wi about the microfacet normal h (Snell in vector form,
-    written independently of gdlearn.kernels.fresnel). None under total internal reflection."""
+    written independently of gdlearn.kernels.bsdf.fresnel). None under total internal reflection."""
     c = np.dot(wi, h)
     if not refract:
         return 2 * c * h - wi
@@ -302,7 +302,7 @@ def test_whole_path_jacobian_is_the_product_of_vertex_jacobians():
 def test_half_vector_is_the_one_the_bsdf_evaluates():
     """The copied h is exactly roughdielectric's generalised half vector (the microfacet normal its
     D(m) is evaluated at), so the offset's microfacet density equals the base's."""
-    from gdlearn.kernels.bsdf_dielectric import _generalized_half_vector
+    from gdlearn.kernels.bsdf.dielectric import _generalized_half_vector
     rng = np.random.default_rng(2)
     for _ in range(200):
         wi_b, wo_b, _, eta, _ = _random_local_config(rng)

@@ -1,8 +1,8 @@
 """Solution of the exercise "replay" (exercises/replay/README.md).
 
 The loop is written out (gdlearn's own loop is a numba kernel over scenes,
-:mod:`gdlearn.integrators.gpt_replay`); it keeps one buffer of (offset - base) per shift direction
-and base pixel and combines them with gdlearn's :func:`gdlearn.shifts.replay.combine_gradients`
+:mod:`gdlearn.integrators.path.gpt_replay`); it keeps one buffer of (offset - base) per shift direction
+and base pixel and combines them with gdlearn's :func:`gdlearn.integrators.gradients.combine_gradients`
 (Eq. 8 / Eq. 16 with weights 0.5), so a backward shift never wraps around the border. The
 reconstruction is gdlearn's uniform control variates (Eq. 14), which average only the identities
 that exist at the borders.
@@ -10,7 +10,8 @@ that exist at the borders.
 import numpy as np
 
 from gdlearn.reconstruct import control_variates
-from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY, combine_gradients
+from gdlearn.integrators.gradients import combine_gradients
+from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 
 
 def accumulate(radiance, width: int, height: int, spp: int, seed: int, dims: int = 4):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from gdlearn.exercises import load_target
+from gdlearn.teaching.exercises import load_target
 
 ex = load_target("cosine-hemisphere")
 

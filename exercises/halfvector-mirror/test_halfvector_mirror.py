@@ -9,26 +9,18 @@ import math
 import numpy as np
 import pytest
 
-from gdlearn.exercises import load_target
+from gdlearn.teaching.exercises import load_target
+from gdlearn.testing.fdjac import H, fd_determinant, unit
+from gdlearn.testing.fdjac import tangent_frame as frame
 
 ex = load_target("halfvector-mirror")
 
 #: Finite-difference step (radians): fourth-order central differences, error ~h^4 |f^(5)| + eps/h
 #: ~ 1e-10 for these smooth maps, so 1e-6 relative agreement is demanded; a missing or inverted
 #: Jacobian is off by O(1) on most configurations (the test checks it has that power).
-H = 1e-6
 REL = 1e-6
 
 
-def unit(v):
-    v = np.asarray(v, float)
-    return v / np.linalg.norm(v)
-
-
-def frame(n):
-    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = unit(np.cross(n, a))
-    return e1, np.cross(n, e1)
 
 
 def sph(theta_deg, phi_deg=0.0):
@@ -100,9 +92,7 @@ def fd_jacobian(wi, wo_b, wi_o):
         w, _, _ = copy(wi, unit(wo_b + u * e1 + v * e2), wi_o)
         return np.array([np.dot(w, f1), np.dot(w, f2)])
 
-    cols = [(-m(2 * du, 2 * dv) + 8 * m(du, dv) - 8 * m(-du, -dv) + m(-2 * du, -2 * dv)) / (12 * H)
-            for du, dv in ((H, 0.0), (0.0, H))]
-    return abs(np.linalg.det(np.array(cols).T))
+    return fd_determinant(m, H)
 
 
 def test_jacobian_matches_finite_differences():

@@ -10,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from gdlearn.exercises import load_target
+from gdlearn.teaching.exercises import load_target
+from gdlearn.testing.fdjac import H, fd_determinant, unit
+from gdlearn.testing.fdjac import tangent_frame as frame
 from gdlearn.shifts.path import jacobian_solid_angle_to_area
 
 ex = load_target("reconnection-jacobian")
@@ -20,19 +22,9 @@ ex = load_target("reconnection-jacobian")
 #: hard case: the hit point varies like a square root near tangency and |f^(5)| grows like cos^-9
 #: (h = 1e-5 misses by 3e-5 at cos ~ 0.02; h = 1e-6 agrees to ~1e-9). So 1e-6 relative agreement is
 #: demanded -- while any wrong cosine or distance factor is off by O(1).
-H = 1e-6
 REL = 1e-6
 
 
-def unit(v):
-    v = np.asarray(v, float)
-    return v / np.linalg.norm(v)
-
-
-def frame(n):
-    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    e1 = unit(np.cross(n, a))
-    return e1, np.cross(n, e1)
 
 
 def hit(surface, o, d):
@@ -68,11 +60,7 @@ def fd_jacobian(x_b, x_o, surface, w0):
         w = unit(y - x_o)
         return np.array([np.dot(w, f1), np.dot(w, f2)])
 
-    cols = []
-    for du, dv in ((H, 0.0), (0.0, H)):
-        d = (-m(2 * du, 2 * dv) + 8 * m(du, dv) - 8 * m(-du, -dv) + m(-2 * du, -2 * dv)) / (12 * H)
-        cols.append(d)
-    return abs(np.linalg.det(np.array(cols).T))
+    return fd_determinant(m, H)
 
 
 def configs(seed, n, grazing):

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from gdlearn.exercises import load_target
+from gdlearn.teaching.exercises import load_target
 from gdlearn.reconstruct import control_variates
 
 ex = load_target("replay")

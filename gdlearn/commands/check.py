@@ -2,7 +2,7 @@
 
 Prints one line per check (what it verifies) and, for a failure, what went wrong in words -- not a
 traceback wall (``-v`` adds pytest's own output). Exit status 0 when every check passes, 1 when
-some fail, 2 for an unknown exercise. See :mod:`gdlearn.exercises` and exercises/README.md.
+some fail, 2 for an unknown exercise. See :mod:`gdlearn.teaching.exercises` and exercises/README.md.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from gdlearn.exercises import EXERCISES_DIR, check, list_exercises
+    from gdlearn.teaching.exercises import EXERCISES_DIR, check, list_exercises
 
     names = list_exercises()
     if args.list or not args.name:

@@ -6,7 +6,7 @@ a summary table and optionally writes the tidy records (``--csv``) and a figure 
 See :mod:`gdlearn.experiments` and the book chapter "What accuracy costs".
 
 SCENE is a scene file, or ``toy`` / ``toy:WxH`` for the analytic toy image of
-:mod:`gdlearn.experiments.toy` (methods ``toy-pt``, ``toy-gpt``; its exact image is the reference).
+:mod:`gdlearn.teaching.toy` (methods ``toy-pt``, ``toy-gpt``; its exact image is the reference).
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import sys
 
 import numpy as np
 
-TOY_METHODS = {"toy-pt": "gdlearn.experiments.toy:ToyPrimal",
-               "toy-gpt": "gdlearn.experiments.toy:ToyGradient"}
+TOY_METHODS = {"toy-pt": "gdlearn.teaching.toy:ToyPrimal",
+               "toy-gpt": "gdlearn.teaching.toy:ToyGradient"}
 
 
 def add_parser(sub) -> None:
@@ -52,7 +52,7 @@ def add_parser(sub) -> None:
 
 
 def _toy(spec: str):
-    from gdlearn.experiments.toy import ToyScene
+    from gdlearn.teaching.toy import ToyScene
     if spec == "toy":
         return ToyScene()
     try:

@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-#: ``--shift`` choices: gdlearn.integrators.gpt.SUPPORTED, spelled out so the parser imports no kernels
+#: ``--shift`` choices: gdlearn.integrators.path.gpt.SUPPORTED, spelled out so the parser imports no kernels
 #: (tests/test_gpt.py checks that the two agree)
 SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
                  "halfvector+replay+reconnection")

@@ -1,4 +1,4 @@
-"""Experiments: what accuracy costs in time (issue 5; book chapter "What accuracy costs").
+"""Experiments: what accuracy costs in time (book chapter "What accuracy costs").
 
 * :mod:`.metrics`     relMSE exactly as the papers define it, MSE, trimmed relMSE, slopes;
 * :mod:`.progressive` the runner: time or pass budgets, geometric snapshots, per-stage timing;
@@ -7,11 +7,11 @@
 * :mod:`.references`  cached long-run references, Mitsuba 3 references, their noise floor;
 * :mod:`.executors`   serial, local process pool, Dask distributed;
 * :mod:`.plots`       convergence plots, image grids, error maps, stage bars, ratios;
-* :mod:`.toy`         toy estimators of an analytic image (exact answer known), for teaching.
+* toy estimators of an analytic image (exact answer known) live in :mod:`gdlearn.teaching.toy`.
 """
-from .metrics import loglog_slope, mse, relmse, relmse_floor, relmse_map, relmse_trimmed, time_to_reach
-from .progressive import Run, Snapshot, pass_schedule, run, time_schedule
-from .study import Method, SceneFile, Study, Task, equal_time, run_task
+from gdlearn.experiments.metrics import loglog_slope, mse, relmse, relmse_floor, relmse_map, relmse_trimmed, time_to_reach
+from gdlearn.experiments.progressive import Run, Snapshot, pass_schedule, run, time_schedule
+from gdlearn.experiments.study import Method, SceneFile, Study, Task, equal_time, run_task
 
 __all__ = ["relmse", "relmse_map", "relmse_trimmed", "relmse_floor", "mse", "loglog_slope",
            "time_to_reach", "run", "Run", "Snapshot", "pass_schedule", "time_schedule", "Method",

@@ -1,8 +1,8 @@
 """Gradient error at equal samples and shift statistics: how good a shift mapping is, before any
-reconstruction (the STAR's Fig. 5 comparison, Hua et al. 2019, seed 001, §3.5; book chapter
+reconstruction (the STAR's Fig. 5 comparison, Hua et al. 2019, §3.5; book chapter
 "Gradient-domain path tracing", book/gpt.md).
 
-A gradient estimator is unbiased whatever the shift (seed 001, Eq. 16 with weights summing to one),
+A gradient estimator is unbiased whatever the shift (Hua et al. 2019, Eq. 16 with weights summing to one),
 so shifts differ only in the *variance* of their gradients. At an equal number of samples per pixel
 that variance is measured here as the error of the estimated forward differences gx, gy against the
 forward differences of a long reference render:
@@ -11,7 +11,7 @@ forward differences of a long reference render:
     m_pq = (R_p + R_q) / 2,
 
 i.e. the squared gradient error relative to the brightness of the pixel pair, with the relMSE
-epsilon of seed 000 §6 (:data:`gdlearn.experiments.metrics.RELMSE_EPS`). Normalising by the pair's
+epsilon of Gruson et al. 2018 §6 (:data:`gdlearn.experiments.metrics.RELMSE_EPS`). Normalising by the pair's
 brightness rather than by the gradient itself keeps flat regions (reference gradient ~ 0) from
 turning the metric into a plain MSE times 1/eps, and weighs errors as the reconstructed image will
 show them: relative to brightness, like the image relMSE. Undefined gradients (the last column of
@@ -29,8 +29,8 @@ import numpy as np
 
 from gdlearn.integrators.base import render
 
-from .metrics import RELMSE_EPS
-from .study import Method, load_scene, make_integrator, scene_name
+from gdlearn.experiments.metrics import RELMSE_EPS
+from gdlearn.experiments.study import Method, load_scene, make_integrator, scene_name
 
 #: actions whose counters ``gpt`` frames carry (gdlearn.shifts.policy.ACTION_NAMES)
 ACTIONS = ("replay", "halfvector", "reconnection", "manifold", "fail")

@@ -1,9 +1,9 @@
 """Error metrics for comparing an image I against a reference R: relMSE, MSE, trimmed relMSE.
 
 The papers gdlearn follows all measure error with the *relative mean squared error*. Gruson et al.
-2018 (seed 000, §6): "We use a relative mean square error metric relMSE= (1/n) sum (R - I)^2/(R^2 +
-0.001), where R is the reference and I our rendered output." Hua et al. 2017 (seed 004, §5) use the
-same formula with "n is the number of pixels", and the STAR (Hua et al. 2019, seed 001, §4.5) notes
+2018 (Gruson et al. 2018, §6): "We use a relative mean square error metric relMSE= (1/n) sum (R - I)^2/(R^2 +
+0.001), where R is the reference and I our rendered output." Hua et al. 2017 (Hua et al. 2017, §5) use the
+same formula with "n is the number of pixels", and the STAR (Hua et al. 2019, §4.5) notes
 "In the BOOKSHELF scene, we discarded 0.01% of the highest error pixels in the reconstructed image
 [...] this only affects the metric, not the reconstruction itself" -- that is :func:`relmse_trimmed`.
 
@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-#: The epsilon of the seeds' relMSE denominator R^2 + 0.001 (seed 000 §6, seed 004 §5).
+#: The epsilon of the papers' relMSE denominator R^2 + 0.001 (Gruson et al. 2018 §6, Hua et al. 2017 §5).
 RELMSE_EPS = 1e-3
-#: The fraction of highest-error pixels the STAR discards for one scene (seed 001 §4.5: 0.01 %).
+#: The fraction of highest-error pixels the STAR discards for one scene (Hua et al. 2019 §4.5: 0.01 %).
 STAR_TRIM = 1e-4
 
 
@@ -52,12 +52,12 @@ def relmse_map(image, reference, eps: float = RELMSE_EPS) -> np.ndarray:
 
 
 def relmse(image, reference, eps: float = RELMSE_EPS) -> float:
-    """relMSE = (1/n) sum (R - I)^2 / (R^2 + 0.001) over pixels and channels (seed 000 §6)."""
+    """relMSE = (1/n) sum (R - I)^2 / (R^2 + 0.001) over pixels and channels (Gruson et al. 2018 §6)."""
     return float(relmse_map(image, reference, eps).mean())
 
 
 def relmse_trimmed(image, reference, trim: float = STAR_TRIM, eps: float = RELMSE_EPS) -> float:
-    """relMSE after discarding the fraction ``trim`` of pixels with the highest error (seed 001 §4.5).
+    """relMSE after discarding the fraction ``trim`` of pixels with the highest error (Hua et al. 2019 §4.5).
 
     Pixels are ranked by their channel-averaged error; ``floor(trim * H * W)`` of them are dropped
     (none on images smaller than 1 / trim pixels, so the trimmed value equals :func:`relmse` there).

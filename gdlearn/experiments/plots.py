@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import metrics
+from gdlearn.experiments import metrics
 
 
 def _plt():

@@ -1,8 +1,8 @@
 """The progressive runner: render for a time or pass budget, keep snapshots, time every stage.
 
 The papers compare estimators on *convergence plots*: error against render time, with images output
-at regular points of one long progressive run (seed 004 §5: "We output renderings after every five
-photon passes and collect the images for error measurement"; seed 000 Fig. 7). :func:`run` does this
+at regular points of one long progressive run (Hua et al. 2017 §5: "We output renderings after every five
+photon passes and collect the images for error measurement"; Gruson et al. 2018 Fig. 7). :func:`run` does this
 for any :class:`~gdlearn.integrators.base.ProgressiveIntegrator`:
 
 * the JIT is warmed first and its time is kept apart (``compile_seconds``), never in the curves;
@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import metrics
-from .solvers import resolve
+from gdlearn.experiments import metrics
+from gdlearn.experiments.solvers import resolve
 
 
 @dataclass

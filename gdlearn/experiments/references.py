@@ -1,7 +1,7 @@
 """Reference images for error measurement: long runs cached on disk, Mitsuba 3 renders, files.
 
 A convergence plot is only as good as its reference. The papers render theirs with a trusted
-estimator for much longer than the compared runs (seed 000 §6: "The reference images are rendered
+estimator for much longer than the compared runs (Gruson et al. 2018 §6: "The reference images are rendered
 using BRE with a ..."). gdlearn does the same, and keeps the reference's own noise in view:
 
 * :func:`render_reference` -- a long run of a gdlearn estimator (default ``pt``), cached in
@@ -10,7 +10,7 @@ using BRE with a ..."). gdlearn does the same, and keeps the reference's own noi
   gdlearn's source (:func:`gdlearn.source_hash`): editing the scene or any of gdlearn's code never
   reuses a stale image.
 * :func:`mitsuba_reference` -- Mitsuba 3 renders over several seeds (via
-  :func:`gdlearn.refs.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
+  :func:`gdlearn.crosscheck.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
 * :func:`load_reference` -- an image file (``.npz`` from this cache, ``.npy``, ``.exr``).
 
 Every :class:`Reference` carries a per-pixel variance estimate when one is known (the two
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics
+from gdlearn.experiments import metrics
 
 #: Bump when the cached file layout or the meaning of a key changes.
 CACHE_FORMAT = 1
@@ -139,7 +139,7 @@ def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_0
     The default seed is far from the small seeds studies use, so the reference is independent of
     the runs it judges (sharing random numbers would correlate their errors and hide them).
     """
-    from .study import load_scene, make_integrator
+    from gdlearn.experiments.study import load_scene, make_integrator
     from gdlearn.integrators.base import render
 
     key = cache_key(scene, estimator, spp, seed, spp_per_pass=spp_per_pass, **options)
@@ -160,7 +160,7 @@ def mitsuba_reference(path, spp: int = 1024, seeds=(101, 102, 103, 104), variant
     """Mitsuba 3's mean over ``seeds`` (``spp // len(seeds)`` each) with its variance (the squared
     standard error over seeds), cached like :func:`render_reference`. ``defaults`` override the
     file's ``<default>`` parameters (``res=64``, ``max_depth=8``)."""
-    from gdlearn.refs.mitsuba import mitsuba_mean_stderr
+    from gdlearn.crosscheck.mitsuba import mitsuba_mean_stderr
 
     if hasattr(path, "path") and hasattr(path, "defaults"):       # a study.SceneFile
         defaults = {**dict(path.defaults), **defaults}

@@ -3,12 +3,12 @@
 The experiments module never reconstructs by itself; it calls :mod:`gdlearn.reconstruct` by the
 solver names the CLI uses (``--solver``):
 
-* ``cv``          -- iterative control-variate reconstruction (STAR, seed 001, §2.3, Algorithm 1);
-* ``cv-weighted`` -- weighted control variates (seed 001, §5, Eq. 20-22), weights from the frame's
+* ``cv``          -- iterative control-variate reconstruction (STAR, Hua et al. 2019, §2.3, Algorithm 1);
+* ``cv-weighted`` -- weighted control variates (Hua et al. 2019, §5, Eq. 20-22), weights from the frame's
   two independent half-buffers (``halves=``: the solver pools their variance estimates over 3 x 3
   pixels, :mod:`gdlearn.reconstruct.control_variates`);
-* ``l2`` / ``l1`` -- screened Poisson reconstruction, L2 or L1 norm (seed 001, §5, Eq. 18-19), with
-  the papers' alpha = 0.2 (seed 004 §5: "the lambda parameter for Poisson reconstruction is set to
+* ``l2`` / ``l1`` -- screened Poisson reconstruction, L2 or L1 norm (Hua et al. 2019, §5, Eq. 18-19), with
+  the papers' alpha = 0.2 (Hua et al. 2017 §5: "the lambda parameter for Poisson reconstruction is set to
   a small value, lambda = 0.2").
 
 A solver may also be any callable ``f(frame) -> image``; tests use that to stay independent of the

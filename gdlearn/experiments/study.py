@@ -6,7 +6,7 @@ every snapshot against the scene's reference. A task returns one *record* (a fla
 snapshot -- the tidy layout in which the convergence plots, "time to reach relMSE x" and equal-time
 ratios are simple group-bys (:mod:`.plots`), and which :meth:`Study.to_csv` writes as is.
 
-The comparison is the papers' (seed 001 §4.5 "a comprehensive equal-time comparison"; seed 000 §6):
+The comparison is the papers' (Hua et al. 2019 §4.5 "a comprehensive equal-time comparison"; Gruson et al. 2018 §6):
 every method gets the same wall-clock budget, JIT compile excluded, reconstruction included.
 """
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from . import metrics, progressive
-from .executors import get_executor
+from gdlearn.experiments import metrics, progressive
+from gdlearn.experiments.executors import get_executor
 
 
 @dataclass(frozen=True)

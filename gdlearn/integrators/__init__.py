@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import importlib
 
-from .base import Frame, PassResult, ProgressiveIntegrator, render
+from gdlearn.integrators.base import Frame, PassResult, ProgressiveIntegrator, render
 
 #: CLI name -> "module:Class". Each estimator module adds its own line.
 REGISTRY = {
-    "pt": "gdlearn.integrators.pt:PathTracer",
-    "gpt-replay": "gdlearn.integrators.gpt_replay:ReplayGPT",
-    "gpt": "gdlearn.integrators.gpt:GradientPathTracer",
+    "pt": "gdlearn.integrators.path.pt:PathTracer",
+    "gpt-replay": "gdlearn.integrators.path.gpt_replay:ReplayGPT",
+    "gpt": "gdlearn.integrators.path.gpt:GradientPathTracer",
     "sppm": "gdlearn.integrators.photon.sppm:SPPM",
     "ppm": "gdlearn.integrators.photon.sppm:PPM",
 }

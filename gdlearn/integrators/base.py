@@ -32,7 +32,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .combine import LatestEstimate, MeanOfPasses
+from gdlearn.integrators.combine import LatestEstimate, MeanOfPasses
 
 
 @dataclass

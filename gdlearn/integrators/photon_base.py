@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import time
 
-from .base import PassResult, ProgressiveIntegrator
-from .combine import LatestEstimate
+from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
+from gdlearn.integrators.combine import LatestEstimate
 
 
 class PhotonPassIntegrator(ProgressiveIntegrator):

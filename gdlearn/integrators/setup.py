@@ -14,8 +14,8 @@ from contextlib import contextmanager
 
 import numba
 
-from ..scene.compile import compile_scene
-from ..scene.effects import plan as effects_plan
+from gdlearn.scene.compile import compile_scene
+from gdlearn.scene.effects import plan as effects_plan
 
 #: Mitsuba's max_depth = -1 (unbounded) as a loop bound; Russian roulette ends such paths.
 UNBOUNDED = 1 << 30

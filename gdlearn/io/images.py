@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from .tonemap import srgb_decode, tonemap
+from gdlearn.io.tonemap import srgb_decode, tonemap
 
 FORMATS = (".exr", ".png", ".npy")
 

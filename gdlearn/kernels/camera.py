@@ -16,7 +16,8 @@ The camera row ``cam`` (float64, ``CAM_WIDTH``) holds origin, the three world ax
 import math
 
 import numpy as np
-from numba import njit
+from gdlearn.kernels.jit import block
+
 
 CAM_O, CAM_X, CAM_Y, CAM_Z = 0, 3, 6, 9
 CAM_TX, CAM_TY, CAM_W, CAM_H, CAM_NEAR, CAM_FAR = 12, 13, 14, 15, 16, 17
@@ -57,7 +58,7 @@ def camera_row(to_world: np.ndarray, fov: float, fov_axis: str, width: int, heig
     return cam
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def camera_ray(cam, film_x, film_y):
     """(origin, unit direction, tmax) of the primary ray through raster point (film_x, film_y)."""
     lx = (1.0 - 2.0 * film_x / cam[CAM_W]) * cam[CAM_TX]
@@ -71,7 +72,7 @@ def camera_ray(cam, film_x, film_y):
     return o, d, cam[CAM_FAR] / inv - near_t
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def camera_raster(cam, p):
     """Inverse of :func:`camera_ray`: (visible, film_x, film_y) of world point ``p``.
 
@@ -94,17 +95,3 @@ def camera_raster(cam, p):
     return ok, fx, fy
 
 
-@njit(cache=True, error_model="numpy")
-def camera_importance(cam, d):
-    """Mitsuba's perspective ``We`` along world direction d leaving the camera (per unit film
-    area on the image plane at distance 1, normalised to integrate to 1 over the film):
-    1 / (A cos^4 theta) with A = 4 tx ty the image-plane area. 0 outside the field of view."""
-    lz = d[0] * cam[9] + d[1] * cam[10] + d[2] * cam[11]
-    if lz <= 0.0:
-        return 0.0
-    lx = (d[0] * cam[3] + d[1] * cam[4] + d[2] * cam[5]) / lz
-    ly = (d[0] * cam[6] + d[1] * cam[7] + d[2] * cam[8]) / lz
-    if abs(lx) > cam[CAM_TX] or abs(ly) > cam[CAM_TY]:
-        return 0.0
-    c2 = lz * lz
-    return 1.0 / (4.0 * cam[CAM_TX] * cam[CAM_TY] * c2 * c2)

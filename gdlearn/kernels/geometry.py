@@ -17,9 +17,9 @@ them. The compile step stores the final geometric normal, so kernels never re-de
 """
 import math
 
-from numba import njit
 
-from .vec import dot, normalize, sub
+from gdlearn.kernels.vec import dot, normalize, sub
+from gdlearn.kernels.jit import inlined
 
 # --- primitive types (column INFO_TYPE) ----------------------------------------------------------
 P_TRIANGLE = 0
@@ -47,12 +47,8 @@ G_A, G_B, G_DA, G_DB = 3, 6, 12, 15
 PRIM_WIDTH = 22
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
-def _v(row, k):
-    return (row[k], row[k + 1], row[k + 2])
 
-
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _v3(P, i, k):
     return (P[i, k], P[i, k + 1], P[i, k + 2])
 
@@ -61,7 +57,7 @@ def _v3(P, i, k):
 # row creates an array view whose reference count two threads would update atomically on every
 # primitive test (the same counter for all rows), which costs more than the test itself.
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def intersect_triangle(P, i, o, d, tmax):
     """Moeller-Trumbore: (t, u, v) with t = inf on a miss. u, v are barycentrics of p1 and p2."""
     e1x, e1y, e1z = P[i, 3], P[i, 4], P[i, 5]
@@ -89,7 +85,7 @@ def intersect_triangle(P, i, o, d, tmax):
     return t, u, v
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def intersect_sphere(P, i, o, d, tmin, tmax):
     """Nearest root in (tmin, tmax) of |o + t d - c| = r, for a unit d.
 
@@ -118,7 +114,7 @@ def intersect_sphere(P, i, o, d, tmin, tmax):
     return math.inf
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def intersect_disk(P, i, o, d, tmax):
     """Plane of the disk, then local coordinates through the dual axes: inside if u^2 + v^2 <= 1."""
     nx, ny, nz = P[i, G_NG], P[i, G_NG + 1], P[i, G_NG + 2]
@@ -138,7 +134,7 @@ def intersect_disk(P, i, o, d, tmax):
     return t, u, v
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
     """(t, u, v) of primitive ``i`` (t = inf: miss, or outside (tmin, tmax))."""
     if ptype == P_TRIANGLE:
@@ -156,7 +152,7 @@ def intersect_prim(prims, ptype, i, o, d, tmin, tmax):
 
 # forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
 # its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def surface(prims, prim_info, prim, o, d, t, u, v):
     """The surface interaction of a hit: (p, ng, ns).
 
@@ -192,7 +188,7 @@ def surface(prims, prim_info, prim, o, d, t, u, v):
     return p, ng, ns
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def offset_origin(p, ng, d):
     """Spawn point for a ray leaving ``p`` along ``d``: pushed off the surface to d's side of ng.
 

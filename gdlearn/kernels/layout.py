@@ -51,5 +51,5 @@ V_GLOSSY = 1          # a microfacet BSDF with alpha >= the roughness threshold 
 V_SPECULAR = 2        # a delta lobe, or a microfacet BSDF with alpha < the threshold
 V_MEDIUM = 3          # a scattering event in a participating medium
 
-#: default roughness threshold below which a vertex counts as (near-)specular (issue 2, item 4).
+#: default roughness threshold below which a vertex counts as (near-)specular.
 ROUGHNESS_THRESHOLD = 0.05

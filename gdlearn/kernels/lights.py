@@ -20,11 +20,11 @@ primitive range ``sa.em_prims[first : first + count]`` with the normalised cumul
 """
 import math
 
-from numba import njit
 
-from .geometry import (G_A, G_B, G_C, G_E1, G_E2, G_HASN, G_NG, G_R, G_SIGN, INFO_TYPE, P_SPHERE,
+from gdlearn.kernels.geometry import (G_A, G_B, G_C, G_E1, G_E2, G_HASN, G_NG, G_R, G_SIGN, INFO_TYPE, P_SPHERE,
                        P_TRIANGLE)
-from .vec import dot, normalize
+from gdlearn.kernels.vec import dot, normalize
+from gdlearn.kernels.jit import block, inlined
 
 E_AREA, E_POINT, E_SPOT, E_DIRECTIONAL, E_CONSTANT = 0, 1, 2, 3, 4
 
@@ -48,7 +48,7 @@ INV_FOUR_PI = 0.25 / math.pi
 
 # forceinline: LLVM inlines this into its callers, the path kernels' per-bounce code (a call would pass
 # its arrays as dozens of scalars; measured in benchmarks/README.md, "pt speed")
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def prim_point(prims, prim_info, prim, u1, u2):
     """A uniform point on a primitive and its normal: (q, n). Triangles: Mitsuba's
     ``square_to_uniform_triangle``; spheres: uniform sphere; disks: concentric disk mapping."""
@@ -91,7 +91,7 @@ def prim_point(prims, prim_info, prim, u1, u2):
     return q, (prims[prim, G_NG], prims[prim, G_NG + 1], prims[prim, G_NG + 2])
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _pick_prim(em_cdf, first, count, u):
     """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
     lo = first
@@ -105,7 +105,7 @@ def _pick_prim(em_cdf, first, count, u):
     return lo
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def spot_falloff(emitters, em, d_world):
     """Mitsuba's ``falloff_curve`` for the world direction ``d_world`` leaving the spot."""
     lx = emitters[em, EM_INV] * d_world[0] + emitters[em, EM_INV + 1] * d_world[1] + emitters[em, EM_INV + 2] * d_world[2]
@@ -123,7 +123,7 @@ def spot_falloff(emitters, em, d_world):
 
 
 # forceinline: as above
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
     """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
 
@@ -192,7 +192,7 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
 
 
 # forceinline: as above
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def emitter_pdf(emitters, em, p, q, nq):
     """Solid-angle pdf at ``p`` with which :func:`sample_emitter` would produce the emitter point
     ``q`` (normal ``nq``) of emitter ``em`` (area or constant; delta emitters: 0). For constant
@@ -214,7 +214,7 @@ def emitter_pdf(emitters, em, p, q, nq):
 
 
 # forceinline: as above
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def eval_emitter(emitters, em, nq, d):
     """Radiance an area emitter sends back along a ray of direction ``d`` that hit it at a point of
     shading normal ``nq`` (zero from behind); constant emitters ignore nq."""

@@ -29,7 +29,7 @@ Every path with interior vertices in {D, G, S, M} falls in exactly one class. A 
 material with lobes of two classes (a plastic: delta or microfacet coating over a diffuse base) is
 of the class of the lobe that produced the next direction. For BSDF samples that is the sampled lobe;
 a next-event term, which no lobe produced, is split by each lobe's posterior probability of having
-produced its direction (:func:`gdlearn.kernels.bsdf.nee_class_share`), so the two MIS strategies
+produced its direction (:func:`gdlearn.kernels.bsdf.dispatch.nee_class_share`), so the two MIS strategies
 estimate the same per-class image and the classes still sum to the full one. Since the light end
 is reached last, the state tracks: the number of interior vertices, which vertex classes occurred,
 the length of the current trailing run of specular vertices and the class of the last non-specular
@@ -41,9 +41,9 @@ vertex (the vertex just before that run). Packed in one int64 (counts saturate a
 """
 from __future__ import annotations
 
-from numba import njit
 
-from .layout import V_DIFFUSE, V_GLOSSY, V_MEDIUM, V_SPECULAR
+from gdlearn.kernels.layout import V_DIFFUSE, V_GLOSSY, V_MEDIUM, V_SPECULAR
+from gdlearn.kernels.jit import block
 
 EMISSION = 0
 DIRECT_LIGHTING = 1
@@ -70,33 +70,33 @@ _LONG_MASK = ((1 << DIFFUSE_INTERREFLECTION) | (1 << GLOSSY) | (1 << SPECULAR) |
               (1 << MULTIPLE_SCATTERING) | (1 << VOLUME_CAUSTICS))
 
 
-@njit(cache=True)
+@block
 def pc_init():
     """The state of a camera path with no interior vertex yet."""
     return (NO_VERTEX << _B_SHIFT) + 0  # int64
 
 
-@njit(cache=True)
+@block
 def _n(state):
     return state & _SAT
 
 
-@njit(cache=True)
+@block
 def _r(state):
     return (state >> 16) & _SAT
 
 
-@njit(cache=True)
+@block
 def _flags(state):
     return (state >> _F_SHIFT) & 0xF
 
 
-@njit(cache=True)
+@block
 def _before(state):
     return (state >> _B_SHIFT) & 0x7
 
 
-@njit(cache=True)
+@block
 def pc_push(state, vclass):
     """Append one interior vertex of class ``vclass`` (a ``layout.V_*``) at the light end."""
     n = _n(state)
@@ -114,7 +114,7 @@ def pc_push(state, vclass):
     return n | (r << 16) | (flags << _F_SHIFT) | (before << _B_SHIFT)
 
 
-@njit(cache=True)
+@block
 def pc_class(state):
     """Class of the path made of the pushed vertices followed by a light (Heckbert notation above)."""
     n = _n(state)
@@ -139,7 +139,7 @@ def pc_class(state):
     return DIFFUSE_INTERREFLECTION
 
 
-@njit(cache=True)
+@block
 def pc_reachable(state, mask):
     """Can this prefix, as it is or extended by more vertices of any class, give a class in ``mask``?
 
@@ -164,7 +164,7 @@ def pc_reachable(state, mask):
     return (ext & mask) != 0
 
 
-@njit(cache=True)
+@block
 def pc_max_interior(mask):
     """Most interior vertices a path of a class in ``mask`` can have; -1 if unbounded."""
     if mask & _LONG_MASK:

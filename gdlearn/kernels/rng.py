@@ -25,12 +25,12 @@ coordinate -- so it falls into two stages, and a path pays the expensive one onc
    ``dim``: the numbers along a path are distinct finaliser outputs of distinct inputs.
 
 ``rand(seed, key, sample, dim) = rand_at(path_state(seed, key, sample), dim)`` is the contract, bit
-for bit: the same numbers as before the split (seed-calibrated statistical tests and stored
-results keep their meaning). The path kernels compute the state once per path and call
+for bit (seed-calibrated statistical tests and stored results rely on it). The path kernels compute the state once per path and call
 :func:`rand_at`: one finaliser per number instead of four.
 """
 import numpy as np
-from numba import njit
+from gdlearn.kernels.jit import inlined
+
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -48,7 +48,7 @@ _INV53 = 1.0 / 9007199254740992.0   # 2^-53
 LIGHT_KEY0 = 1 << 40
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def mix64(z):
     """SplitMix64 finaliser: a bijective avalanche on 64-bit integers."""
     z = np.uint64(z)
@@ -57,7 +57,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def path_state(seed, key, sample):
     """The 64-bit state of the path (seed, key, sample): the first three stages of :func:`hash4`."""
     h = mix64(np.uint64(seed) * _GOLDEN + _ONE)
@@ -65,25 +65,25 @@ def path_state(seed, key, sample):
     return mix64(h ^ (np.uint64(sample) * _GOLDEN + _C_SAMPLE))
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def hash_at(h, dim):
     """The 64-bit hash of dimension ``dim`` of the path with state ``h`` (the last stage)."""
     return mix64(h ^ (np.uint64(dim) * _GOLDEN + _C_DIM))
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def hash4(seed, key, sample, dim):
     """A 64-bit hash of four non-negative integers."""
     return hash_at(path_state(seed, key, sample), dim)
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def rand_at(h, dim):
     """A uniform float64 in [0, 1) for dimension ``dim`` of the path with state ``h``; 53 bits."""
     return float(hash_at(h, dim) >> _S11) * _INV53
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def rand(seed, key, sample, dim):
     """A uniform float64 in [0, 1) for the coordinates (seed, key, sample, dim); 53 random bits.
     Equal, bit for bit, to ``rand_at(path_state(seed, key, sample), dim)``."""

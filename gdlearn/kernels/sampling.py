@@ -9,8 +9,8 @@ mapping). Densities are with respect to solid angle (directions) or area (points
 overflow or produce 0/0.
 """
 import math
+from gdlearn.kernels.jit import block, inlined
 
-from numba import njit
 
 INV_PI = 1.0 / math.pi
 INV_TWO_PI = 0.5 / math.pi
@@ -25,7 +25,7 @@ _C2, _C4, _C6, _C8 = -0.5, 1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0
 _C10, _C12, _C14, _C16 = -1.0 / 3628800.0, 1.0 / 479001600.0, -1.0 / 87178291200.0, 1.0 / 20922789888000.0
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def sincos_quarter(a):
     """(sin a, cos a) for |a| <= pi/4 by polynomials: a few multiply-adds instead of a call into
     libm's sincos (whose argument reduction the concentric map does not need; the call was ~7% of
@@ -36,7 +36,7 @@ def sincos_quarter(a):
     return s, c
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def uniform_unit_circle(u):
     """(cos phi, sin phi) for the uniform angle phi = 2 pi u - pi/4, without libm's sincos.
 
@@ -54,7 +54,7 @@ def uniform_unit_circle(u):
     return sx * x, sy * y
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def square_to_uniform_disk_concentric(u1, u2):
     """Shirley-Chiu concentric map of the unit square to the unit disk (area-preserving, low
     distortion); Mitsuba's ``warp::square_to_uniform_disk_concentric``. Returns (x, y).
@@ -72,13 +72,8 @@ def square_to_uniform_disk_concentric(u1, u2):
     return r * (c if wide else s), r * (s if wide else c)
 
 
-@njit(cache=True)
-def uniform_disk_pdf():
-    """Density of the concentric disk warp with respect to area (unit disk)."""
-    return INV_PI
 
-
-@njit(cache=True, forceinline=True)
+@inlined
 def square_to_cosine_hemisphere(u1, u2):
     """Cosine-weighted hemisphere (Malley's method: a concentric disk sample lifted onto the
     hemisphere); pdf = cos(theta) / pi. Mitsuba's ``warp::square_to_cosine_hemisphere``."""
@@ -87,13 +82,13 @@ def square_to_cosine_hemisphere(u1, u2):
     return (x, y, z)
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def cosine_hemisphere_pdf(w):
     """pdf of :func:`square_to_cosine_hemisphere` (0 below the horizon)."""
     return INV_PI * w[2] if w[2] > 0.0 else 0.0
 
 
-@njit(cache=True)
+@block
 def square_to_uniform_sphere(u1, u2):
     """Uniform direction on the unit sphere; pdf = 1 / (4 pi)."""
     z = 1.0 - 2.0 * u2
@@ -102,12 +97,12 @@ def square_to_uniform_sphere(u1, u2):
     return (r * math.cos(phi), r * math.sin(phi), z)
 
 
-@njit(cache=True)
+@block
 def uniform_sphere_pdf():
     return INV_FOUR_PI
 
 
-@njit(cache=True)
+@block
 def square_to_uniform_hemisphere(u1, u2):
     """Uniform direction on the upper (+z) hemisphere; pdf = 1 / (2 pi)."""
     z = u1
@@ -116,12 +111,12 @@ def square_to_uniform_hemisphere(u1, u2):
     return (r * math.cos(phi), r * math.sin(phi), z)
 
 
-@njit(cache=True)
+@block
 def uniform_hemisphere_pdf(w):
     return INV_TWO_PI if w[2] >= 0.0 else 0.0
 
 
-@njit(cache=True)
+@block
 def square_to_uniform_cone(u1, u2, cos_cutoff):
     """Uniform direction in the cone of half-angle acos(cos_cutoff) around +z;
     pdf = 1 / (2 pi (1 - cos_cutoff)).
@@ -136,7 +131,7 @@ def square_to_uniform_cone(u1, u2, cos_cutoff):
     return (sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
 
 
-@njit(cache=True)
+@block
 def uniform_cone_pdf(w, cos_cutoff):
     """Solid-angle density of :func:`square_to_uniform_cone` (0 outside the cone)."""
     if w[2] < cos_cutoff:
@@ -145,7 +140,7 @@ def uniform_cone_pdf(w, cos_cutoff):
     return 1.0 / denom if denom > 0.0 else 0.0
 
 
-@njit(cache=True)
+@block
 def square_to_uniform_triangle(u1, u2):
     """Uniform barycentrics (b1, b2) on a triangle (Mitsuba's ``square_to_uniform_triangle``:
     the square is folded along its diagonal). The point is (1 - b1 - b2) p0 + b1 p1 + b2 p2 and the
@@ -154,7 +149,7 @@ def square_to_uniform_triangle(u1, u2):
     return 1.0 - t, t * u2
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def balance_heuristic(pdf_a, pdf_b):
     """Veach's balance heuristic w_a = p_a / (p_a + p_b) (Eq. 9.10) as 1 / (1 + p_b / p_a).
 
@@ -169,7 +164,7 @@ def balance_heuristic(pdf_a, pdf_b):
     return 1.0 / (1.0 + r)
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def power_heuristic(pdf_a, pdf_b):
     """Veach's power heuristic with beta = 2, w_a = p_a^2 / (p_a^2 + p_b^2) (Eq. 9.12), computed as
     1 / (1 + (p_b / p_a)^2) so squares of extreme pdfs never overflow. Mitsuba 3's path integrator

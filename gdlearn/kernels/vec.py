@@ -5,58 +5,53 @@ are orthonormal bases ``(s, t, n)`` with ``n`` the shading normal (z axis of the
 Mitsuba's ``Frame3f``.
 """
 import math
+from gdlearn.kernels.jit import inlined
 
-from numba import njit
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def add(a, b):
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def sub(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def mul(a, b):
     """Component-wise product (colours)."""
     return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def scale(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@njit(cache=True, forceinline=True)
-def fma(a, s, b):
-    """a * s + b (a ray point: origin + t * direction)."""
-    return (a[0] * s + b[0], a[1] * s + b[1], a[2] * s + b[2])
 
-
-@njit(cache=True, forceinline=True)
+@inlined
 def neg(a):
     return (-a[0], -a[1], -a[2])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def norm(a):
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def normalize(a):
     n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     if n == 0.0:
@@ -65,17 +60,13 @@ def normalize(a):
     return (a[0] * inv, a[1] * inv, a[2] * inv)
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def max3(a):
     return max(a[0], max(a[1], a[2]))
 
 
-@njit(cache=True, forceinline=True)
-def mean3(a):
-    return (a[0] + a[1] + a[2]) * (1.0 / 3.0)
 
-
-@njit(cache=True, forceinline=True)
+@inlined
 def coordinate_system(n):
     """An orthonormal basis (s, t) completing the unit vector n (Duff et al. 2017, branchless)."""
     sign = math.copysign(1.0, n[2])
@@ -86,13 +77,13 @@ def coordinate_system(n):
     return s, t
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def to_local(v, s, t, n):
     """World -> local shading frame (n is the z axis)."""
     return (dot(v, s), dot(v, t), dot(v, n))
 
 
-@njit(cache=True, forceinline=True)
+@inlined
 def to_world(v, s, t, n):
     """Local shading frame -> world."""
     return (s[0] * v[0] + t[0] * v[1] + n[0] * v[2],

@@ -27,12 +27,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from ..kernels import lights as li
-from ..kernels.lights import _pick_prim, prim_point, spot_falloff
-from ..kernels.sampling import square_to_uniform_cone, square_to_uniform_disk_concentric
-from ..kernels.vec import coordinate_system, to_world
+
+from gdlearn.kernels import lights as li
+from gdlearn.kernels.lights import _pick_prim, prim_point, spot_falloff
+from gdlearn.kernels.sampling import square_to_uniform_cone, square_to_uniform_disk_concentric
+from gdlearn.kernels.vec import coordinate_system, to_world
+from gdlearn.kernels.jit import block, inlined
 
 
 def emitter_power(sa) -> np.ndarray:
@@ -69,7 +70,7 @@ def emitter_cdf(sa) -> np.ndarray:
     return c
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _select(cdf, u):
     """(index, probability, leftover uniform in [0, 1)) of the first cdf entry > u."""
     i = _pick_prim(cdf, 0, cdf.shape[0], u)
@@ -79,7 +80,7 @@ def _select(cdf, u):
     return i, p, rest
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def sample_emission(sa, cdf, u):
     """Start of a light path from the 5 uniforms ``u`` (selection, 2 position, 2 direction).
 
@@ -135,13 +136,13 @@ def sample_emission(sa, cdf, u):
     return _sample_far(sa, em, sel, rgb, et, u)
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _normalized(v):
     n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     return (v[0] / n, v[1] / n, v[2] / n) if n > 0.0 else (0.0, 0.0, 1.0)
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _sample_far(sa, em, sel, rgb, et, u):
     """Directional and constant emitters: a point on the disc of radius r_bs, centred r_bs behind
     the bounding sphere's centre and facing the direction of travel (pbrt-v3 ``InfiniteAreaLight::

@@ -15,7 +15,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from gdlearn.kernels.jit import block, inlined
+
 
 _P1, _P2, _P3 = 73856093, 19349663, 83492791
 
@@ -29,17 +30,17 @@ class HashGrid(NamedTuple):
     mask: int             # T - 1 (T a power of two)
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def bucket(ix, iy, iz, mask):
     return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3)) & mask
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def cell_of(x, inv_h):
     return int(math.floor(x * inv_h))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _build(pts, inv_h, mask, pos, cell, order, start):
     n = pts.shape[0]
     b = np.empty(n, dtype=np.int64)
@@ -74,7 +75,7 @@ def build(points: np.ndarray, cell_size: float) -> HashGrid:
     return grid
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def query(grid, p, r, out):
     """Original ids of the points with |x - p| < r into ``out`` (in visiting order); returns how
     many there are (at most len(out) are written). The loop is the pattern the gather kernels use."""

@@ -27,19 +27,20 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
-from ..kernels import layout as L
-from ..kernels.bsdf import bsdf_eta, bsdf_pdf, bsdf_sample, sampled_lobe_class, vertex_class
-from ..kernels.bvh import STACK_SIZE, closest_hit_inline
-from ..kernels.geometry import INFO_MAT, offset_origin, surface
-from ..kernels.rng import LIGHT_KEY0, path_state, rand_at
-from ..kernels.scene_query import borrow
-from ..kernels.vec import coordinate_system, dot, max3, to_local, to_world
-from ..scene.compile import borrowed
-from .emit import emitter_cdf, sample_emission
-from .records import (F_DELTA_DIR, F_DELTA_OUT, F_DELTA_POS, F_PHOTON, K_EMITTER, K_SURFACE, LightPaths,
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_pdf, bsdf_sample, sampled_lobe_class, vertex_class
+from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
+from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
+from gdlearn.kernels.rng import LIGHT_KEY0, path_state, rand_at
+from gdlearn.kernels.arrays import borrow
+from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
+from gdlearn.kernels.arrays import borrowed
+from gdlearn.photons.emit import emitter_cdf, sample_emission
+from gdlearn.photons.records import (F_DELTA_DIR, F_DELTA_OUT, F_DELTA_POS, F_PHOTON, K_EMITTER, K_SURFACE, LightPaths,
                       allocate, concatenate)
+from gdlearn.kernels.jit import block, inlined, noalloc, rows
 
 DIMS_START, DIMS_PER_BOUNCE = 5, 6
 D_LOBE, D_U1, D_U2, D_RR = 0, 1, 2, 3
@@ -58,7 +59,7 @@ class TraceParams(NamedTuple):
     want_other: bool
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _put(rec, k, p, ng, ns, d):
     for c in range(3):
         rec.pos[k, c] = p[c]
@@ -67,7 +68,7 @@ def _put(rec, k, p, ng, ns, d):
         rec.d_in[k, c] = d[c]
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _put_meta(rec, k, beta, pdf_fwd, kind, obj, prim, flags):
     for c in range(3):
         rec.beta[k, c] = beta[c]
@@ -80,7 +81,7 @@ def _put_meta(rec, k, beta, pdf_fwd, kind, obj, prim, flags):
     rec.flags[k] = flags
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _adjoint_weight(mat, w, wi, wo, wi_w, wo_w, ng, ns):
     """The importance-transport weight from bsdf_sample's radiance weight ``w`` (module docstring)."""
     e = bsdf_eta(mat, wi, wo)
@@ -91,7 +92,7 @@ def _adjoint_weight(mat, w, wi, wo, wi_w, wo_w, ng, ns):
     return (w[0] * s, w[1] * s, w[2] * s)
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@noalloc
 def trace_one(sa, cdf, prm, seed, pass_index, j, rec, base, stack):
     """Trace light path j of pass ``pass_index`` into rows base, base+1, ...; returns its vertex count."""
     h = path_state(seed, LIGHT_KEY0 + j, pass_index)
@@ -162,14 +163,14 @@ def trace_one(sa, cdf, prm, seed, pass_index, j, rec, base, stack):
     return nv
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _borrow_rec(r):
     return LightPaths(borrow(r.pos), borrow(r.nrm), borrow(r.nsh), borrow(r.d_in), borrow(r.beta),
                       borrow(r.pdf_fwd), borrow(r.pdf_rev), borrow(r.kind), borrow(r.obj), borrow(r.prim),
                       borrow(r.lobe), borrow(r.flags), borrow(r.parent), borrow(r.path), borrow(r.depth))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def trace_batch(sa, cdf, prm, seed, pass_index, j0, slots, nv):
     """Light paths j0 .. j0 + len(nv) - 1 into fixed slots (max_vertices + 1 rows each); ``nv[i]``
     receives path i's vertex count."""
@@ -177,7 +178,7 @@ def trace_batch(sa, cdf, prm, seed, pass_index, j0, slots, nv):
     _trace_rows(borrowed(sa), cdf, prm, seed, pass_index, j0, _borrow_rec(slots), nv)
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@rows
 def _trace_rows(sa, cdf, prm, seed, pass_index, j0, slots, nv):
     per = prm.max_vertices + 1
     for i in prange(nv.shape[0]):
@@ -185,14 +186,14 @@ def _trace_rows(sa, cdf, prm, seed, pass_index, j0, slots, nv):
         nv[i] = trace_one(sa, cdf, prm, seed, pass_index, j0 + i, slots, i * per, stack)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def compact(slots, per, nv, off, out):
     """Copy path i's ``nv[i]`` slot rows to rows off[i] ... of ``out``, parents re-indexed."""
     # borrowed views, as trace_batch: no reference counts shared by the threads
     _compact_rows(_borrow_rec(slots), per, nv, off, _borrow_rec(out))
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@rows
 def _compact_rows(slots, per, nv, off, out):
     for i in prange(nv.shape[0]):
         _copy_path(slots, i * per, nv[i], off[i], out)
@@ -201,7 +202,7 @@ def _compact_rows(slots, per, nv, off, out):
 # a function of its own on purpose: written directly in the prange body, stores into the fields of
 # a NamedTuple of arrays were lost (numba 0.68's parfor lowering; tests/test_photons_trace.py
 # compares the compacted records with the slots)
-@njit(cache=True, error_model="numpy")
+@block
 def _copy_path(slots, s0, n, t0, out):
     for v in range(n):
         s = s0 + v

@@ -41,29 +41,12 @@ API: every solver returns a :class:`Reconstruction`
   :mod:`.irls`. ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1 energy
   per reweighting.
 
-Speed at 1280 x 720 x 3 (benchmarks/bench_reconstruct.py, 2 threads, best of 5, 2026-12-01, the
-machine shared: load average 1.5-2.5, so the two threads had about one core between them and
-wall ~ CPU time): exact L2 0.073-0.076 s; 50 uniform CV iterations 0.50-0.59 s; weighted L2
-2.8 s (35 DCT-preconditioned CG steps); plain scipy CG on the L2 normal equations 11.4 s (330
-iterations). L1 defaults 0.72-0.75 s (1.9 s quiet before the fused IRLS pass, 1.56 s after it);
-interleaved with main (3d79ea0) in the same run 1.11 s -> 0.72 s (1.54x, CPU alike), 26
-multigrid-preconditioned CG steps, at 0.99977 of the energy of a 20 x 50 plain-CG emulation of
-the reference preset and RMS error 0.0304 on the 320 x 180 quality problem (both as before).
-What made the difference: the split layout (the finest sweep 2.5 -> 1.25 ms on one core), the
-pre-sweep, residual and restriction fused into one pass on large levels, CG's inner products
-fused into the operator and the IRLS pass (the last step updates only x), numba's division
-checks off where divisions are guarded (error_model="numpy": they kept the weight loops scalar),
-no x += d pass, arrays reused across reweightings, loops in kernel bodies (helpers called with
-many array slices cost ~0.1 us a call in serial code -- small images had become slower than
-main's; now 320 x 180 takes 37 ms against 56 ms, 64 x 64 9.3 ms against 8.7 ms). Left, per
-reweighting on one core: the IRLS pass ~11 ms (memory-bound: 96 bytes of float64 data a pixel;
-float32 data would break exact recovery) and ~13 ms of V-cycle and CG product per CG step, plus
-the exact L2 start (~65 ms); fusing the post-smoothing with the CG product measured slower (those
-passes are compute-bound), so did folding the prolongation into the sweeps.
+Speed at 1280 x 720 x 3, what made the difference and what is left: ``benchmarks/README.md``
+(bench_reconstruct).
 """
-from .control_variates import CVHistory, control_variates, cv_history
-from .conventions import Reconstruction, forward_differences, variances_from_halves
-from .poisson import poisson_l1, poisson_l2
+from gdlearn.reconstruct.control_variates import CVHistory, control_variates, cv_history
+from gdlearn.reconstruct.conventions import Reconstruction, forward_differences, variances_from_halves
+from gdlearn.reconstruct.poisson import poisson_l1, poisson_l2
 
 __all__ = ["control_variates", "cv_history", "CVHistory", "poisson_l2", "poisson_l1",
            "Reconstruction", "forward_differences", "variances_from_halves"]

@@ -39,10 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
-from .conventions import Reconstruction, expand_like, prepare, variances_from_halves
-from .cv_weights import weighted_step, weights
+from gdlearn.reconstruct.conventions import Reconstruction, expand_like, prepare, variances_from_halves
+from gdlearn.reconstruct.cv_weights import weighted_step, weights
 
 #: window radius over which variances estimated from half-buffers are pooled (cv_weights)
 VARIANCE_POOL = 1

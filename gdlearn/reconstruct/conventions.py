@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
 __all__ = ["Reconstruction", "Problem", "prepare", "forward_differences", "variances_from_halves",
            "pool_variance", "POOL_STATISTIC", "expand_like"]

@@ -9,16 +9,8 @@ progressive render can end up worse than the primal image. A window is far stead
 with the pixel's own estimate keeps an isolated noisy pixel (a firefly, the light's edge) from
 being averaged into trust; and the primal's window takes the median because a pixel's variance
 jumps with the image at a light's rim -- a mean there lends the dark pixels beside a light the
-light's variance, weights them nearly uniformly and spreads the light's noise (the accuracy
-chapter's toy image: relMSE 4.2e-3 with means everywhere, *worse* than the primal's 3.7e-3; 4.5e-5
-with the median). Measured (2026-12-01, relMSE against an exact image or a 2048-spp pt reference,
-mean over seeds), per-pixel -> means everywhere -> median for the primal, means for the gradients:
-toy image 96 x 64, 6 seeds, 16 spp 1.0e-2 -> 7.6e-2 -> 6.7e-4, 256 spp 1.1e-4 -> 4.2e-3 -> 4.5e-5;
-gpt-replay at 48^2, 4 seeds: Cornell box 4 spp 0.124 -> 0.039 -> 0.031, 16 spp 2.5e-2 -> 1.3e-2 ->
-7.7e-3, 64 spp 1.8e-2 -> 4.2e-3 -> 2.2e-3 (primal 1.2e-2); fog box 4 spp 0.36 -> 0.083 -> 0.055,
-64 spp 7.6e-3 -> 8.4e-3 -> 6.0e-3 (primal 5.0e-2); caustics box 16 spp 0.118 -> 0.093 -> 0.072,
-64 spp 3.3e-2 -> 3.0e-2 -> 2.5e-2 (primal 0.10). Medians everywhere lost at 4 spp (Cornell 0.11,
-caustics 0.58); a 5 x 5 window (plain means) was worse than 3 x 3 everywhere measured.
+light's variance, weights them nearly uniformly and spreads the light's noise (measured on the accuracy chapter's toy image and on gpt-replay frames of three scenes:
+``benchmarks/README.md``, "variance pooling").
 
 The kernels: :func:`weights` turns the variances into the normalised Eq. 21-22 weights of each
 pixel's four neighbour identities (the self weight is what remains), :func:`weighted_step` runs one
@@ -29,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
 __all__ = ["weights", "weighted_step"]
 

@@ -33,20 +33,17 @@ How that step is solved is what makes this path fast:
 
 All of it runs on the red-black split layout of :mod:`.split` (each padded row stored as its even
 then its odd columns), where every stencil reads contiguous half rows and the smoother computes
-only the colour it moves. Where the time goes at 1280 x 720 x 3 (one thread, ~0.72 s in all,
-2026-12-01): the 20 IRLS passes ~0.23 s (memory-bound on the float64 data: 96 bytes a pixel),
-the 26 V-cycles ~0.26 s, the CG products ~0.075 s, the exact L2 start ~0.065 s, the Multigrid
-hierarchies ~0.03 s.
+only the colour it moves. Where the time goes at 1280 x 720 x 3: ``benchmarks/README.md`` (bench_reconstruct).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from ._jit import kernel
-from .multigrid import Multigrid
-from .planar import pcg_planar
-from .split import from_split, half_count, split_operator, split_shape, to_split
+from gdlearn.reconstruct._jit import kernel
+from gdlearn.reconstruct.multigrid import Multigrid
+from gdlearn.reconstruct.planar import pcg_planar
+from gdlearn.reconstruct.split import from_split, half_count, split_operator, split_shape, to_split
 
 __all__ = ["irls_multigrid"]
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ._jit import kernel
-from .mg_kernels import _split_row, n_chunks
-from .split import half_count
+from gdlearn.reconstruct._jit import kernel
+from gdlearn.reconstruct.mg_kernels import _split_row, n_chunks
+from gdlearn.reconstruct.split import half_count
 
 
 @njit(cache=True, fastmath=True, inline="always")

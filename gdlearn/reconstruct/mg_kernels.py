@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ._jit import kernel
-from .split import half_count
+from gdlearn.reconstruct._jit import kernel
+from gdlearn.reconstruct.split import half_count
 
 #: Row-parallel kernels that need a row buffer split the rows into at most this many chunks and
 #: make one buffer per chunk (made per row, the allocations cost ~10 % of a sweep at 1280 x 720).

@@ -34,9 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import mg_fused as mf
-from . import mg_kernels as mk
-from .split import from_split, split_shape, to_split
+from gdlearn.reconstruct import mg_fused as mf
+from gdlearn.reconstruct import mg_kernels as mk
+from gdlearn.reconstruct.split import from_split, split_shape, to_split
 
 __all__ = ["Multigrid", "COARSE_EDGE_FACTOR", "COARSEST_CELLS", "OMEGA", "SOR_OMEGA",
            "FUSED_MIN_SIZE"]

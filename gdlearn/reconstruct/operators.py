@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
 __all__ = ["normal_rhs", "apply_normal", "dot_channels", "cg_update", "cg_direction",
            "irls_residual_lengths", "l1_energy", "uniform_rhs", "uniform_residual"]

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
 __all__ = ["to_planar", "from_planar", "apply_planar", "planar_operator", "pcg_planar"]
 

@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from .conventions import Problem, Reconstruction, expand_like, prepare
-from .dct import laplacian_eigenvalues, solve_shifted_laplacian
-from .irls import irls_multigrid
-from .operators import (apply_normal, cg_direction, cg_update, dot_channels,
+from gdlearn.reconstruct.conventions import Problem, Reconstruction, expand_like, prepare
+from gdlearn.reconstruct.dct import laplacian_eigenvalues, solve_shifted_laplacian
+from gdlearn.reconstruct.irls import irls_multigrid
+from gdlearn.reconstruct.operators import (apply_normal, cg_direction, cg_update, dot_channels,
                         fill_irls_weights, irls_residual_lengths, l1_energy, normal_diagonal,
                         normal_rhs,
                         sum_inverse_lengths as _sum_inverse, uniform_residual, uniform_rhs)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ._jit import kernel
+from gdlearn.reconstruct._jit import kernel
 
 __all__ = ["split_shape", "to_split", "from_split", "apply_split", "split_operator", "half_count"]
 

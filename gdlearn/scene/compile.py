@@ -9,7 +9,7 @@ field            dtype / shape                meaning
 prims            f64 (N, PRIM_WIDTH)          primitive rows (kernels/geometry.py), BVH order
 prim_info        i32 (N, INFO_WIDTH)          type, material, emitter, media, shape index
 prim_area        f64 (N,)                     surface area of each primitive
-nodes, node_info f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/bvh.py)
+nodes, node_info f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/accel/bvh.py)
 materials        f64 (B, MAT_WIDTH)           BSDF rows (kernels/layout.py, bsdf.material_row)
 media            f64 (K, MED_WIDTH)           homogeneous media (sigma_t, albedo, g)
 emitters         f64 (E, EM_WIDTH)            emitter rows (kernels/lights.py)
@@ -27,58 +27,16 @@ analytic. Shapes keep their ``Source`` so geometry errors name the scene file an
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
-
 import numpy as np
-from numba import njit
 
-from ..kernels import bvh as _bvh
-from ..kernels import geometry as g
-from ..kernels import layout as L
-from ..kernels import lights as li
-from ..kernels.camera import camera_row
-from ..kernels.scene_query import borrow
-from .model import Scene, SceneError
+from gdlearn.kernels.accel import bvh as _bvh
+from gdlearn.kernels import geometry as g
+from gdlearn.kernels import layout as L
+from gdlearn.kernels import lights as li
+from gdlearn.kernels.camera import camera_row
+from gdlearn.kernels.arrays import SceneArrays
+from gdlearn.scene.model import Scene, SceneError
 
-
-class SceneArrays(NamedTuple):
-    prims: np.ndarray
-    prim_info: np.ndarray
-    prim_area: np.ndarray
-    nodes: np.ndarray
-    node_info: np.ndarray
-    materials: np.ndarray
-    media: np.ndarray
-    emitters: np.ndarray
-    em_prims: np.ndarray
-    em_cdf: np.ndarray
-    camera: np.ndarray
-    bsphere: np.ndarray
-    env: int
-    camera_medium: int
-
-    @property
-    def width(self) -> int:
-        return int(self.camera[14])
-
-    @property
-    def height(self) -> int:
-        return int(self.camera[15])
-
-
-
-@njit(cache=True)
-def borrowed(sa):
-    """``sa`` with every array borrowed (no reference counting; :func:`kernels.scene_query.borrow`).
-
-    Call it once at the top of a parallel kernel and pass the result down: the arrays are shared by
-    all threads, and their atomic reference counts were the path tracer's scaling bottleneck. Only
-    valid while ``sa`` itself is alive (for the duration of that kernel call); call it from compiled
-    code only, never from Python (the returned arrays would not keep their memory alive)."""
-    return SceneArrays(borrow(sa.prims), borrow(sa.prim_info), borrow(sa.prim_area), borrow(sa.nodes),
-                       borrow(sa.node_info), borrow(sa.materials), borrow(sa.media), borrow(sa.emitters),
-                       borrow(sa.em_prims), borrow(sa.em_cdf), borrow(sa.camera), borrow(sa.bsphere),
-                       sa.env, sa.camera_medium)
 
 # ----------------------------------------------------------------------------------- tessellation
 _RECT = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
@@ -234,8 +192,8 @@ def _bounds(rows, types):
 # ---------------------------------------------------------------------------------------- tables
 def _material_rows(bsdfs) -> np.ndarray:
     """Developer C's rows; widened for a roughplastic's transmittance table when one is present."""
-    from ..kernels.bsdf import material_row
-    from ..kernels.bsdf_plastic import ROUGHPLASTIC_WIDTH
+    from gdlearn.kernels.bsdf.dispatch import material_row
+    from gdlearn.kernels.bsdf.plastic import ROUGHPLASTIC_WIDTH
     width = L.MAT_WIDTH
     if any(b.type == "roughplastic" for b in bsdfs):
         width = max(width, ROUGHPLASTIC_WIDTH)

@@ -1,5 +1,5 @@
 """The effects plan: which light transport a scene can show, which part was asked for, and therefore
-which code paths run (ARCHITECTURE.md, "Effects, not switches"; issue 2, item 3).
+which code paths run (ARCHITECTURE.md, "Effects, not switches").
 
 ``plan(scene, request=None) -> EffectsPlan``. The effect classes are those of
 :mod:`gdlearn.kernels.pathclass` (emission, direct lighting, diffuse interreflection, glossy,
@@ -24,11 +24,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..kernels import layout
-from ..kernels.pathclass import (ALL_MASK, CAUSTICS, CLASS_NAMES, DIFFUSE_INTERREFLECTION,
+from gdlearn.kernels import layout
+from gdlearn.kernels.pathclass import (ALL_MASK, CAUSTICS, CLASS_NAMES, DIFFUSE_INTERREFLECTION,
                                  DIRECT_LIGHTING, EMISSION, GLOSSY, MULTIPLE_SCATTERING, SINGLE_SCATTERING,
                                  SPECULAR, VOLUME_CAUSTICS, pc_max_interior)
-from .model import Scene
+from gdlearn.scene.model import Scene
 
 _VOLUME = (SINGLE_SCATTERING, MULTIPLE_SCATTERING, VOLUME_CAUSTICS)
 GROUPS = {
@@ -264,7 +264,7 @@ def _run_flags(p, scene, surf, media, vol, scatter):
 class _CallableModule(type(__import__("sys"))):
     """Importing this module sets ``gdlearn.scene.effects`` to the module itself, which would hide
     the package's lazy ``effects -> plan`` alias; calling the module calls :func:`plan`, so
-    ``gdlearn.scene.effects(scene)`` (issue 2's spelling) works either way."""
+    ``gdlearn.scene.effects(scene)`` works either way."""
 
     def __call__(self, scene, request=None, **kw):
         return plan(scene, request, **kw)

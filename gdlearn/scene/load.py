@@ -19,11 +19,11 @@ import os
 
 import numpy as np
 
-from . import plugins
-from .meshio import MeshError, read_obj, read_ply, transform_mesh, triangle_areas, vertex_normals
-from .model import BSDF, Scene, SceneError, Shape, Source
-from .transforms import parse_transform, scale, translate
-from .xmlvalues import VALUE_TAGS, Node, Props, collect_defaults, parse_xml, substitute
+from gdlearn.scene import plugins
+from gdlearn.scene.meshio import MeshError, read_obj, read_ply, transform_mesh, triangle_areas, vertex_normals
+from gdlearn.scene.model import BSDF, Scene, SceneError, Shape, Source
+from gdlearn.scene.transforms import parse_transform, scale, translate
+from gdlearn.scene.xmlvalues import VALUE_TAGS, Node, Props, collect_defaults, parse_xml, substitute
 
 PLUGIN_TAGS = ("integrator", "sensor", "film", "sampler", "rfilter", "shape", "bsdf", "emitter",
                "medium", "phase")

@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from .model import BSDF, Emitter, Film, Integrator, Medium, SceneError, Sensor, Source
-from .transforms import coordinate_system, lookat, translate
+from gdlearn.scene.model import BSDF, Emitter, Film, Integrator, Medium, SceneError, Sensor, Source
+from gdlearn.scene.transforms import coordinate_system, lookat, translate
 
 #: Mitsuba 3's named indices of refraction (src/bsdfs/ior.h), for int_ior/ext_ior given as strings.
 IOR_PRESETS = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,

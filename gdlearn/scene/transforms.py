@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import SceneError
-from .xmlvalues import Node, _check_attrs, _floats
+from gdlearn.scene.model import SceneError
+from gdlearn.scene.xmlvalues import Node, _check_attrs, _floats
 
 TRANSFORM_TAGS = ("translate", "scale", "rotate", "matrix", "lookat")
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import SceneError
+from gdlearn.scene.model import SceneError
 
 VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "point", "vector")
 _SUBST = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")

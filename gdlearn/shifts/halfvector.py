@@ -32,11 +32,11 @@ all: it is a straight pass-through, shifted as w'_o = -w'_i with J = 1.
 """
 import math
 
-from numba import njit
 
 from gdlearn.kernels import layout as L
 from gdlearn.kernels import vec
-from gdlearn.kernels.fresnel import fresnel_dielectric, refract_m
+from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric, refract_m
+from gdlearn.kernels.jit import block, ir_inline
 
 ZERO3 = (0.0, 0.0, 0.0)
 #: |w_i + k w_o| below this (relative to 1 + k) is a degenerate half vector: h's direction would be
@@ -44,7 +44,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 DEGENERATE_H = 1e-9
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def half_vector(wi, wo, eta):
     """``(h, k, ok)``: Walter's generalised half vector of (wi, wo) in the local frame, +z oriented;
     k = 1 for reflection (wi, wo on one side), eta_it for refraction through relative index eta."""
@@ -59,7 +59,7 @@ def half_vector(wi, wo, eta):
     return vec.scale(h, 1.0 / n), k, True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def dh_dwo(wi, wo, h, k):
     """|dh/dw_o| of the generalised half vector (Walter et al. 2007 Eq. 14 / 16); 0 if degenerate."""
     den = vec.dot(wi, h) + k * vec.dot(wo, h)
@@ -68,7 +68,7 @@ def dh_dwo(wi, wo, h, k):
     return k * k * abs(vec.dot(wo, h)) / (den * den)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def halfvector_copy(wi_b, wo_b, wi_o, eta, transmissive):
     """Shift the outgoing direction at one vertex by copying the half vector (Eq. 15).
 
@@ -114,7 +114,7 @@ def halfvector_copy(wi_b, wo_b, wi_o, eta, transmissive):
     return wo_o, j, True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def halfvector_copy_world(ns_b, wi_b, wo_b, ns_o, wi_o, eta, transmissive):
     """:func:`halfvector_copy` with world-space directions; the local frames are
     ``vec.coordinate_system`` of the base and offset shading normals. Returns (wo_o world, J_w, ok)."""
@@ -127,7 +127,7 @@ def halfvector_copy_world(ns_b, wi_b, wo_b, ns_o, wi_o, eta, transmissive):
     return vec.normalize(vec.to_world(wo, so, to, ns_o)), j, True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def halfvector_copy_mat(mat, wi_b, wo_b, wi_o, is_delta):
     """Half-vector copy at a vertex with material row ``mat`` (local frame). For a delta lobe the
     returned Jacobian is 1: the direction carries a discrete probability, not a density."""

@@ -36,10 +36,11 @@ surface (a medium end vertex would need a 3-D chart); glossy chains moved as if 
 import math
 
 import numpy as np
-from numba import njit
+
 
 from gdlearn.kernels import vec
 from gdlearn.shifts.halfvector import half_vector
+from gdlearn.kernels.jit import block, ir_inline
 
 # --- shape rows ---------------------------------------------------------------------------------
 SHAPE_PLANE = 0
@@ -86,12 +87,12 @@ def sphere_row(center, radius):
     return row
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def _v3(a, i, c):
     return (a[i, c], a[i, c + 1], a[i, c + 2])
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def shape_frame(shapes, j, x):
     """(s, t, n) local frame of chain vertex j at x."""
     if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
@@ -101,7 +102,7 @@ def shape_frame(shapes, j, x):
     return s, t, n
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def shape_chart(shapes, j, x, u, v):
     """Move x on its surface by (u, v) in the tangent frame (derivative at 0 is orthonormal)."""
     s, t, n = shape_frame(shapes, j, x)
@@ -112,7 +113,7 @@ def shape_chart(shapes, j, x, u, v):
     return vec.add(c, vec.scale(vec.normalize(vec.sub(y, c)), shapes[j, SH_R]))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def shape_contains(shapes, j, x):
     if int(shapes[j, SH_TYPE]) != SHAPE_PLANE:
         return True
@@ -121,7 +122,7 @@ def shape_contains(shapes, j, x):
             and abs(vec.dot(d, _v3(shapes, j, SH_V))) <= shapes[j, SH_EXT + 1])
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (wrong side,
     degenerate half vector, vertex off its surface)."""
@@ -147,7 +148,7 @@ def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _max_abs(a, m):
     r = 0.0
     for i in range(m):
@@ -155,7 +156,7 @@ def _max_abs(a, m):
     return r
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def solve_linear(A, B, m, nrhs):
     """Solve A Z = B in place (Gaussian elimination, partial pivoting); Z overwrites B. False if
     A is singular to working precision (numba's np.linalg.solve would raise instead)."""
@@ -191,7 +192,7 @@ def solve_linear(A, B, m, nrhs):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def chain_length_scale(x0, X, xe, k):
     total = vec.norm(vec.sub(_v3(X, 0, 0), x0)) + vec.norm(vec.sub(xe, _v3(X, k - 1, 0)))
     for j in range(k - 1):
@@ -199,7 +200,7 @@ def chain_length_scale(x0, X, xe, k):
     return total / (k + 1)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
     """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) and B = dC/dx_e (2k x 2, tangent
     plane of x_e with normal ne), by central differences. False if a probe is invalid."""
@@ -237,14 +238,14 @@ def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, 
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _moved(X, dX, lam, shapes, k, Xn):
     for j in range(k):
         p = shape_chart(shapes, j, _v3(X, j, 0), lam * dX[2 * j, 0], lam * dX[2 * j + 1, 0])
         Xn[j, 0], Xn[j, 1], Xn[j, 2] = p[0], p[1], p[2]
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _norm2(a, m):
     s = 0.0
     for i in range(m):
@@ -252,7 +253,7 @@ def _norm2(a, m):
     return math.sqrt(s)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
     """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
     chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
@@ -292,7 +293,7 @@ def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, ma
     return r < tol, max_iter, r
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
     """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8,
     G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints."""
@@ -309,7 +310,7 @@ def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
     return d, True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
     """Fill targets (k x 2) with the base chain's tangential half-vector components (0 at a perfect
     specular vertex up to round-off); False if the base chain itself is invalid."""
@@ -323,7 +324,7 @@ def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, max_iter):
     """True if the walk from the offset chain back to x_b returns to the base chain: near a caustic
     several chains join the same endpoints and the shift would not be invertible there."""
@@ -340,7 +341,7 @@ def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, ma
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, X_out, max_iter,
                    check_reversible):
     """Shift the specular chain X_base (k x 3) between x_b and x_c to join x'_b and x_c.

@@ -16,13 +16,14 @@ back to the finite difference of the two base estimates.
 import math
 
 import numpy as np
-from numba import njit
+from gdlearn.kernels.jit import block
+
 
 #: |log r| beyond which the weight is exactly 0 or 1 in float64 (exp(-746) underflows anyway).
 _LOG_CLAMP = 700.0
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def mis_weight_from_log_ratio(log_r):
     """1 / (1 + exp(log_r)), stable for any log_r (including +-inf); NaN -> 1 (base keeps its weight)."""
     if log_r != log_r:
@@ -37,7 +38,7 @@ def mis_weight_from_log_ratio(log_r):
     return 1.0 / (1.0 + math.exp(log_r))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def mis_weight(p_base, p_offset, jacobian):
     """Eq. 17 balance weight of the base path, w = p_base / (p_base + p_offset |J|), in ratio form.
 
@@ -52,7 +53,7 @@ def mis_weight(p_base, p_offset, jacobian):
     return mis_weight_from_log_ratio(math.log(p_offset) + math.log(j) - math.log(p_base))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def mis_weight_products(pdfs_base, pdfs_offset, n, log_jacobian):
     """Eq. 17 for path densities given as products of the first n per-vertex densities; the
     products are summed as logs so a long path of tiny densities does not underflow to 0 / 0."""
@@ -68,7 +69,7 @@ def mis_weight_products(pdfs_base, pdfs_offset, n, log_jacobian):
     return mis_weight_from_log_ratio(lr)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def shift_weights(p_base, p_offset, jacobian, ok):
     """Weights of one base sample and its shift: ``(w_base, w_offset_factor)``.
 

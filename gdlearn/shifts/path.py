@@ -29,9 +29,10 @@ measures volume, not area, there).
 import math
 
 import numpy as np
-from numba import njit
+
 
 from gdlearn.kernels import vec
+from gdlearn.kernels.jit import block, ir_inline
 
 PATH_FIELDS = ("pos", "ng", "ns", "mat", "med", "vclass", "pdf_sa", "pdf_area")
 
@@ -47,7 +48,7 @@ def new_path(max_vertices: int):
             np.zeros(n), np.zeros(n))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def set_vertex(path, i, p, ng, ns, mat, med, vclass, pdf_sa):
     """Write vertex ``i`` (pdf_area is filled later by :func:`fill_area_pdfs`)."""
     pos, png, pns, pmat, pmed, pvc, psa, _ = path
@@ -61,25 +62,20 @@ def set_vertex(path, i, p, ng, ns, mat, med, vclass, pdf_sa):
     psa[i] = pdf_sa
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def get_pos(path, i):
     p = path[0]
     return (p[i, 0], p[i, 1], p[i, 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def get_ng(path, i):
     p = path[1]
     return (p[i, 0], p[i, 1], p[i, 2])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def get_ns(path, i):
-    p = path[2]
-    return (p[i, 0], p[i, 1], p[i, 2])
 
-
-@njit(cache=True, error_model="numpy")
+@block
 def copy_path(src, dst, n):
     """Copy the first n vertices of src into dst (the offset path starts as the base path)."""
     _copy_rows(src[0], dst[0], n)
@@ -92,14 +88,14 @@ def copy_path(src, dst, n):
     dst[7][:n] = src[7][:n]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def _copy_rows(a, b, n):
     for i in range(n):
         for k in range(3):
             b[i, k] = a[i, k]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def abs_cos(n, w):
     """|cos| between a unit direction and a normal; 1 for a medium vertex (zero normal)."""
     if n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0:
@@ -107,7 +103,7 @@ def abs_cos(n, w):
     return abs(vec.dot(n, w))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def geometry_term(x, nx, y, ny):
     """G(x, y) = |cos theta_x| |cos theta_y| / |x - y|^2 (visibility not included); 0 if x == y."""
     d = vec.sub(y, x)
@@ -118,7 +114,7 @@ def geometry_term(x, nx, y, ny):
     return abs_cos(nx, w) * abs_cos(ny, w) / d2
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def solid_angle_to_area(pdf_sa, x, y, ny):
     """Area density at y of a direction sampled at x with solid-angle density pdf_sa (Veach Eq. 8.10)."""
     d = vec.sub(y, x)
@@ -128,7 +124,7 @@ def solid_angle_to_area(pdf_sa, x, y, ny):
     return pdf_sa * abs_cos(ny, vec.scale(d, 1.0 / math.sqrt(d2))) / d2
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def fill_area_pdfs(path, n):
     """pdf_area[i] = density of vertex i+1 in the area measure, from pdf_sa[i] (last entry: 0)."""
     psa, pa = path[6], path[7]
@@ -138,7 +134,7 @@ def fill_area_pdfs(path, n):
         pa[n - 1] = 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def jacobian_solid_angle_to_area(j_sa, x_b, y_b, ny_b, x_o, y_o, ny_o):
     """Area-measure Jacobian |dy'/dy| of a shift whose direction map at x has solid-angle Jacobian
     j_sa = |dw'/dw| (base segment x_b -> y_b, offset segment x_o -> y_o, x_b and x_o held fixed).

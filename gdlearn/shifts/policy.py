@@ -30,7 +30,7 @@ the same from y, whose next vertex *is* x_{b+1}. Any other action leaves the off
 y_{b+1} of its own, and the backward shift then asks the criterion about x_b, y_b and y_{b+1}: if it
 holds there, the backward shift would reconnect x_b to y_{b+1} instead of returning x, so the forward
 shift must be declared failed. The kernels run that check after every non-reconnecting step
-(:func:`gdlearn.kernels.gpt_mixed.inverse_reconnects`; Kettunen et al.'s policies use the stronger
+(:func:`gdlearn.integrators.path.gpt_surface.mixed.inverse_reconnects`; Kettunen et al.'s policies use the stronger
 rule "the next vertices agree in class", which implies it).
 
 Mixed policies (:func:`is_mixed`): ``replay+reconnection`` -- the STAR's "simple but effective
@@ -46,10 +46,11 @@ The integrators count what ran in a stats vector indexed by the ``STAT_*`` const
 (:func:`record`), so every frame can report which shifts ran, succeeded and failed.
 """
 import numpy as np
-from numba import njit
+
 
 from gdlearn.kernels import layout as L
 from gdlearn.shifts.reconnection import connectable
+from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
 
 # --- policies --------------------------------------------------------------------------------
 POLICY_REPLAY = 0
@@ -72,8 +73,10 @@ SHIFT_MANIFOLD = 3
 SHIFT_FAIL = 4
 ACTION_NAMES = ("replay", "halfvector", "reconnection", "manifold", "fail")
 
-#: longest specular chain the manifold walk is asked to move (issue 7: chains of length 1-3).
+#: longest specular chain the manifold walk is asked to move (chains of 1-3 vertices).
 MAX_CHAIN = 3
+#: class of a "vertex" at infinity (the path escaped): never connectable, must match on both paths
+ESCAPED = -1
 
 # --- statistics: counters[action * 3 + outcome] ------------------------------------------------
 OUTCOME_RUN = 0
@@ -91,7 +94,7 @@ def policy_code(name: str) -> int:
                          f"{', '.join(sorted(POLICIES))}") from None
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def specular_chain_end(vclass, start, n):
     """Index of the first connectable vertex at or after ``start`` (n if none): the chain
     x_start .. x_{end-1} is the run of specular vertices the manifold walk would move."""
@@ -101,13 +104,13 @@ def specular_chain_end(vclass, start, n):
     return i
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def is_mixed(policy):
     """True for the policies that replay instead of failing on a class mismatch (module docstring)."""
     return policy == POLICY_REPLAY_RECONNECTION or policy == POLICY_HALFVECTOR_REPLAY_RECONNECTION
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def mixed_action(policy, conn_b, conn_o):
     """A mixed policy's action where no reconnection runs: the half-vector copy under
     ``halfvector+replay+reconnection`` when neither the base nor the offset vertex is connectable
@@ -119,45 +122,74 @@ def mixed_action(policy, conn_b, conn_o):
     return SHIFT_REPLAY
 
 
-@njit(cache=True, error_model="numpy")
-def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
-    """The action for the segment leaving vertex b >= 1 (module docstring); the primary segment
-    (sensor -> x_1) is shifted by the pixel offset itself, which the integrator does.
+@leaf
+def conn(c):
+    """Is a vertex of class ``c`` connectable (:func:`gdlearn.shifts.reconnection.connectable`)? An
+    escaped path (:data:`ESCAPED`) never is."""
+    return c != ESCAPED and connectable(c)
 
-    ``vclass_base`` holds the base path's vertex classes (n valid vertices); ``class_b_offset`` is
-    the class of the already shifted offset vertex x'_b. This is the decision table alone: the
-    kernels add the visibility of the reconnecting segment and the reversibility check of the step
-    that did not reconnect (module docstring).
-    """
-    cb = connectable(class_b)
-    co = connectable(class_b_offset)
-    if policy == POLICY_REPLAY:          # the identity in primary sample space: never a mismatch
-        return SHIFT_REPLAY
-    if is_mixed(policy):
-        if cb and co and (b + 1 >= n or connectable(vclass_base[b + 1])):
-            return SHIFT_RECONNECT
-        return mixed_action(policy, cb, co)
-    if cb != co:
+
+@noalloc
+def decide(policy, cls_b, cls_o, cls_next):
+    """The table for Kettunen et al.'s policies with the next base vertex known (``cls_next``, or
+    :data:`ESCAPED`): fail if base and offset disagree on connectability (not invertible, Kettunen
+    et al. 2015), reconnect when x_b, x'_b and x_{b+1} are connectable, else replay or the
+    half-vector copy. ``cls_b`` is the class of the lobe the base sampled (V_SPECULAR for a delta
+    lobe). The renderer's kernels call this function; :func:`choose_shift` is its form over a whole
+    vertex-class list (with the manifold choice and the next-event segment)."""
+    cb = conn(cls_b)
+    if cb != conn(cls_o):
         return SHIFT_FAIL
-    if b + 1 >= n:
-        # no next base vertex: the segment to a light sample (next-event estimation) is reconnected
-        # from a connectable vertex; from a specular one it can only follow the copied direction
-        if cb:
-            return SHIFT_RECONNECT
-        return SHIFT_REPLAY if policy == POLICY_REPLAY_RECONNECTION else SHIFT_HALFVECTOR
-    nxt = vclass_base[b + 1]
-    if cb and connectable(nxt):
+    if policy == POLICY_REPLAY:
+        return SHIFT_REPLAY
+    if cb and conn(cls_next):
         return SHIFT_RECONNECT
-    if policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and cb and nxt == L.V_SPECULAR:
-        end = specular_chain_end(vclass_base, b + 1, n)
-        if end < n and end - (b + 1) <= MAX_CHAIN:
-            return SHIFT_MANIFOLD
     if policy == POLICY_REPLAY_RECONNECTION:
         return SHIFT_REPLAY
     return SHIFT_HALFVECTOR
 
 
-@njit(cache=True, error_model="numpy")
+@leaf
+def mixed_decide(policy, cls_b, cls_o, cls_next):
+    """The table for the mixed policies (:func:`is_mixed`): reconnect where x_b, x'_b and x_{b+1} are
+    all connectable, else :func:`mixed_action`. The kernels call it; where the reconnecting segment
+    turns out blocked they continue with :func:`mixed_action` (and so would the backward shift)."""
+    cb, co = conn(cls_b), conn(cls_o)
+    if cb and co and conn(cls_next):
+        return SHIFT_RECONNECT
+    return mixed_action(policy, cb, co)
+
+
+@block
+def choose_shift(policy, class_b, class_b_offset, vclass_base, b, n):
+    """The action for the segment leaving vertex b >= 1 (module docstring); the primary segment
+    (sensor -> x_1) is shifted by the pixel offset itself, which the integrator does.
+
+    ``vclass_base`` holds the base path's vertex classes (n valid vertices); ``class_b_offset`` is
+    the class of the already shifted offset vertex x'_b; ``b + 1 == n`` is the segment to a light
+    sample (next-event estimation). This is the decision table alone, made of the functions the
+    kernels call (:func:`decide`, :func:`mixed_decide`); the kernels add the visibility of the
+    reconnecting segment and the reversibility check of the step that did not reconnect.
+    """
+    if policy == POLICY_REPLAY:          # the identity in primary sample space: never a mismatch
+        return SHIFT_REPLAY
+    nxt = vclass_base[b + 1] if b + 1 < n else L.V_DIFFUSE
+    if is_mixed(policy):
+        # a light sample is connectable: next-event reconnects from a connectable pair
+        return mixed_decide(policy, class_b, class_b_offset, nxt)
+    if b + 1 >= n:
+        # no next base vertex: the segment to a light sample is reconnected from a connectable vertex;
+        # from a specular one it can only follow the copied direction
+        return decide(policy, class_b, class_b_offset, L.V_DIFFUSE)
+    if policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(class_b) and conn(class_b_offset) \
+            and nxt == L.V_SPECULAR:
+        end = specular_chain_end(vclass_base, b + 1, n)
+        if end < n and end - (b + 1) <= MAX_CHAIN:
+            return SHIFT_MANIFOLD
+    return decide(policy, class_b, class_b_offset, nxt)
+
+
+@block
 def record(stats, action, ok):
     """Count one shift of ``action`` and its outcome in ``stats`` (int64[N_STATS])."""
     stats[action * 3 + OUTCOME_RUN] += 1

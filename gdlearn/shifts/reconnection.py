@@ -22,26 +22,26 @@ almost surely has zero BSDF. Visibility of the new segment x'_b -> y is the call
 """
 import math
 
-from numba import njit
 
 from gdlearn.kernels import layout as L
 from gdlearn.kernels import vec
 from gdlearn.shifts.path import abs_cos
+from gdlearn.kernels.jit import block, ir_inline
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def connectable(vclass):
     """True for vertex classes a reconnection may touch (STAR Sec. 3.3: 'diffuse enough')."""
     return vclass == L.V_DIFFUSE or vclass == L.V_GLOSSY or vclass == L.V_MEDIUM
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def can_reconnect(class_b, class_b_offset, class_y):
     """Reconnection x'_b -> y is admissible (and, being symmetric in base and offset, reversible)."""
     return connectable(class_b) and connectable(class_b_offset) and connectable(class_y)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
     """|dw'/dw| of the reconnection in the solid-angle measure at x_b (the solid-angle form in the
     module docstring: Jacobian 1 in area, STAR Sec. 3.3, times dA = d^2/|cos| dw on both paths).
@@ -59,7 +59,7 @@ def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
     return (co / c) * (d2 / do2)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def reconnect(x_b, x_b_offset, y, n_y):
     """Shift the segment x_b -> y to x'_b -> y.
 

@@ -1,6 +1,6 @@
 """Random-sequence replay: the shift mapping of the proof-of-concept gradient-domain path tracer.
 
-Hua et al. 2019 (the STAR, seed 001), Sec. 2.3 and Algorithm 1; first used for primary-sample-space
+Hua et al. 2019 (the STAR), Sec. 2.3 and Algorithm 1; first used for primary-sample-space
 Metropolis by Kelemen et al. 2002. Book chapter: ``book/gpt-replay.md``.
 
 The shift (Eq. 3). A base path x through pixel p is produced by the path tracer from a vector of
@@ -33,7 +33,7 @@ its backward shift (from (x+1, y) or (x, y+1)) inside the image, so it always ge
 last column of gx and the last row of gy are undefined (zero here; the reconstructions mask them).
 Algorithm 1 as printed writes the backward shifts to ``G[x-1, y]`` / ``G[x, y-1]``; at x = 0 or
 y = 0 that index is -1, which array code silently wraps to the last column / row. Here x and y are
-handled by the same code path (:func:`combine_gradients`), so neither can wrap.
+handled by the same code path (:func:`gdlearn.integrators.gradients.combine_gradients`), so neither can wrap.
 
 Russian roulette on shifts (optional). A shift may be skipped with probability 1 - q, where q is
 chosen from the base contribution *before* the offset is traced (:func:`shift_survival`); a kept
@@ -44,7 +44,8 @@ difference is then the offset alone); q = 0 there would bias the gradient.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from gdlearn.kernels.jit import ir_inline
+
 
 #: Neighbour offsets (dx, dy) of the four shifts, in buffer order: right, left, down, up.
 SHIFT_DX = np.array([1, -1, 0, 0], dtype=np.int64)
@@ -58,7 +59,7 @@ SHIFT_WEIGHTS = (0.5, 0.5)
 DIM_SHIFT_RR = 1 << 40
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def offset_film_position(fx, fy, k):
     """T_pq on the film (Eq. 3): the base path's film position moved by exactly one pixel towards
     neighbour k (same sub-pixel jitter, so h_q(T(x)) = h_p(x)). The rest of the path is replayed by
@@ -66,7 +67,7 @@ def offset_film_position(fx, fy, k):
     return fx + SHIFT_DX[k], fy + SHIFT_DY[k]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def neighbour_inside(x, y, k, width, height):
     """Does shift k of a base path in pixel (x, y) land inside the image?"""
     nx = x + SHIFT_DX[k]
@@ -74,7 +75,7 @@ def neighbour_inside(x, y, k, width, height):
     return 0 <= nx < width and 0 <= ny < height
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@ir_inline
 def shift_survival(base, threshold, q_min):
     """Probability q of tracing a shift whose base path contributed ``base`` (rgb).
 
@@ -90,29 +91,5 @@ def shift_survival(base, threshold, q_min):
     return min(q, 1.0)
 
 
-def combine_gradients(diffs: np.ndarray, weights=SHIFT_WEIGHTS) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 8 / Eq. 16 with constant weights: forward-difference gradients from per-base-pixel shift
-    differences.
-
-    ``diffs[k, y, x]`` is the mean over base paths of pixel (x, y) of (offset - base) for shift k
-    (order :data:`RIGHT`, :data:`LEFT`, :data:`DOWN`, :data:`UP`); entries of shifts that left the
-    image are ignored. Returns ``gx, gy`` (H x W [x C]) with
-
-        gx[y, x] = w_f * diffs[RIGHT, y, x] - w_b * diffs[LEFT, y, x+1]   (x < W-1)
-        gy[y, x] = w_f * diffs[DOWN, y, x]  - w_b * diffs[UP, y+1, x]     (y < H-1)
-
-    (the backward shift from q to p estimates I_p - I_q, hence the minus) and zeros in the
-    undefined last column of gx / last row of gy. The buffers are separate per base pixel so that a
-    row-parallel kernel never has two rows adding into one element.
-    """
-    w_f, w_b = weights
-    diffs = np.asarray(diffs, dtype=np.float64)
-    gx = np.zeros_like(diffs[RIGHT])
-    gy = np.zeros_like(diffs[DOWN])
-    gx[:, :-1] = w_f * diffs[RIGHT, :, :-1] - w_b * diffs[LEFT, :, 1:]
-    gy[:-1, :] = w_f * diffs[DOWN, :-1, :] - w_b * diffs[UP, 1:, :]
-    return gx, gy
-
-
 __all__ = ["SHIFT_DX", "SHIFT_DY", "RIGHT", "LEFT", "DOWN", "UP", "SHIFT_WEIGHTS", "DIM_SHIFT_RR",
-           "offset_film_position", "neighbour_inside", "shift_survival", "combine_gradients"]
+           "offset_film_position", "neighbour_inside", "shift_survival"]

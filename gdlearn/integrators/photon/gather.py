@@ -28,23 +28,24 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
-from ...kernels import layout as L
-from ...kernels.bsdf import bsdf_eval, bsdf_sample, sampled_lobe_class, vertex_class
-from ...kernels.bsdf_plastic import _spec_prob
-from ...kernels.bvh import STACK_SIZE, closest_hit_inline
-from ...kernels.camera import camera_ray
-from ...kernels.fresnel import fresnel_dielectric
-from ...kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from ...kernels.lights import eval_emitter
-from ...kernels.pathclass import pc_class, pc_init, pc_push
-from ...kernels.rng import path_state, rand_at
-from ...kernels.vec import coordinate_system, dot, to_local, to_world
-from ...kernels.scene_query import borrow
-from ...photons.grid import HashGrid, bucket, cell_of
-from ...photons.trace import _borrow_rec
-from ...scene.compile import borrowed
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_sample, sampled_lobe_class, vertex_class
+from gdlearn.kernels.bsdf.plastic import _spec_prob
+from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric
+from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
+from gdlearn.kernels.lights import eval_emitter
+from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
+from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
+from gdlearn.kernels.arrays import borrow
+from gdlearn.photons.grid import HashGrid, bucket, cell_of
+from gdlearn.photons.trace import _borrow_rec
+from gdlearn.kernels.arrays import borrowed
+from gdlearn.kernels.jit import block, inlined, rows
 
 
 class GatherParams(NamedTuple):
@@ -62,12 +63,12 @@ class GatherOut(NamedTuple):
     bad: np.ndarray       # (H,): non-finite terms dropped
 
 
-@njit(cache=True, error_model="numpy", forceinline=True)
+@inlined
 def _wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def gather_path(sa, prm, h, o, d):
     """Trace to the gather point. Returns (ok, p, ng, frame n/s/t, wi, mat row, weight, state, m,
     travelled distance, emission): ``m`` camera vertices before the gather point."""
@@ -122,7 +123,7 @@ def gather_path(sa, prm, h, o, d):
     return False, zero, zero, (zero, zero, zero), zero, -1, beta, state, m, travelled, le
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _class_ok(lp, v, state, mask):
     """Is the full path (camera state incl. the gather point, then the photon's light vertices
     y_{k-1} .. y_1 found through ``parent``) of a wanted class?"""
@@ -134,7 +135,7 @@ def _class_ok(lp, v, state, mask):
     return _wanted(mask, state)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def density(lp, grid, prm, gp, r):
     """(sum of f Phi / |cos_g| over photons within r of the gather point ``gp``, photon count)."""
     p, ng, frame, wi, mat, state, m = gp
@@ -173,7 +174,7 @@ def density(lp, grid, prm, gp, r):
     return (a0, a1, a2), cnt
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def gather_rows(sa, lp, grids, prm, seed, sample0, radius, out):
     """Every pixel's two gather points (samples sample0 + h, half h queries grids[h]) into ``out``;
     ``radius`` (H x W) is the kernel radius per pixel."""
@@ -183,17 +184,17 @@ def gather_rows(sa, lp, grids, prm, seed, sample0, radius, out):
                  sample0, radius, _borrow_out(out))
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _borrow_grid(g):
     return HashGrid(borrow(g.pos), borrow(g.cell), borrow(g.order), borrow(g.start), g.inv_h, g.mask)
 
 
-@njit(cache=True, error_model="numpy")
+@block
 def _borrow_out(o):
     return GatherOut(borrow(o.phi), borrow(o.m), borrow(o.le), borrow(o.foot), borrow(o.bad))
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@rows
 def _gather_rows(sa, lp, ga, gb, prm, seed, sample0, radius, out):
     for y in prange(radius.shape[0]):
         out.bad[y] = _gather_row(sa, lp, (ga, gb), prm, seed, sample0, radius, out, y)
@@ -201,7 +202,7 @@ def _gather_rows(sa, lp, ga, gb, prm, seed, sample0, radius, out):
 
 # a function of its own: stores into a NamedTuple's arrays written directly in a prange body are
 # lost (numba 0.68; see photons/trace.py)
-@njit(cache=True, error_model="numpy")
+@block
 def _gather_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
     w = radius.shape[1]
     cam = sa.camera

@@ -38,16 +38,16 @@ import math
 
 import numpy as np
 
-from ...kernels import layout as L
-from ...kernels.pathclass import CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, GLOSSY, SPECULAR
-from ...photons import grid as hashgrid
-from ...photons.records import BYTES_PER_VERTEX
-from ...photons.trace import LightTracer, TraceParams
-from ..base import PassResult
-from ..combine import MeanOfPasses
-from ..photon_base import PhotonPassIntegrator
-from ..setup import UNBOUNDED, SceneSetup
-from .gather import GatherOut, GatherParams, gather_rows
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.pathclass import CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, GLOSSY, SPECULAR
+from gdlearn.photons import grid as hashgrid
+from gdlearn.photons.records import BYTES_PER_VERTEX
+from gdlearn.photons.trace import LightTracer, TraceParams
+from gdlearn.integrators.base import PassResult
+from gdlearn.integrators.combine import MeanOfPasses
+from gdlearn.integrators.photon_base import PhotonPassIntegrator
+from gdlearn.integrators.setup import UNBOUNDED, SceneSetup
+from gdlearn.integrators.photon.gather import GatherOut, GatherParams, gather_rows
 
 #: sample index of the camera paths that measure the initial radius (no pass reaches it)
 FOOTPRINT_SAMPLE = 1 << 40

@@ -1,0 +1,1 @@
+"""gpt's lockstep base/offset kernels on surfaces (no media)."""

@@ -1,0 +1,1 @@
+"""gpt's lockstep base/offset kernels with media and null interfaces."""

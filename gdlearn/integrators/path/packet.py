@@ -1,0 +1,349 @@
+"""The packet path tracer: Mitsuba 3's ``path`` for ``PK`` paths at once, for surfaces of diffuse
+BSDFs lit by area emitters (the Cornell box, the mesh scene), the same estimator bit for bit.
+
+:func:`gdlearn.integrators.path.surface.radiance_path` follows one path from the camera to its end; the
+bounces of a path depend on each other, so most of a bounce waits for the previous one (a chain of
+divisions, square roots and a traversal per bounce) and its data-dependent branches stall the CPU
+each time they are mispredicted. Here a row of the image is a queue of (pixel, sample) *items*
+worked off by ``PK`` lanes, each lane one path: every step runs for all lanes before the next step
+-- trace the lanes' rays (a packet, :mod:`gdlearn.kernels.accel.packet`), shade every lane up to its
+shadow ray, trace the shadow rays, add the next-event terms -- and a lane whose path ended takes
+the next item. Independent lanes overlap in the CPU, and the traversal runs SIMD over the rays.
+
+The shading of a lane is :func:`radiance_path`'s bounce, calling the same functions in the same
+order on the same random numbers (``rand_at(h, dim(bounce, k))``); the per-sample radiances are
+kept per item and summed per pixel in sample order afterwards. So the image equals the scalar
+kernel's bit for bit (tests/test_pt_packet.py), threads and passes included.
+
+:func:`eligible` says when it applies: no media (``path``), every BSDF ``diffuse``, every emitter
+an area emitter, no environment, every primitive a triangle without vertex normals, an effects
+mask that keeps all the (diffuse) paths the depth allows. Everything else renders with
+:mod:`gdlearn.integrators.path.surface`.
+"""
+import math
+
+import numpy as np
+
+
+from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_eval, bsdf_pdf
+from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.geometry import G_HASN, INFO_EMITTER, INFO_MAT, INFO_TYPE, P_TRIANGLE, offset_origin, surface
+from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE
+from gdlearn.kernels.lights import E_AREA, EM_TYPE, emitter_pdf, eval_emitter, sample_emitter
+from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_HIT, Q_PRIM, S_U, S_V, lanes_only, packet_trace
+from gdlearn.kernels.pathclass import DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, EMISSION
+from gdlearn.kernels.rng import path_state, rand, rand_at
+from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_hemisphere
+from gdlearn.kernels.scene_query import shadow_ray
+from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_RR, dim
+from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
+from gdlearn.kernels.jit import block, leaf, noalloc
+
+# float rows (after the traversal's): the ray set of the next closest hit, the shadow ray set,
+# throughput, radiance, beta * next-event term waiting for its shadow ray, previous vertex, its pdf, eta
+R_O = N_S_TRACE
+R_SO = R_O + 7
+R_BETA = R_SO + 7
+R_L = R_BETA + 3
+R_C = R_L + 3
+R_PP = R_C + 3
+R_PPDF = R_PP + 3
+R_ETA = R_PPDF + 1
+R_UEM = R_ETA + 1       # 3: this bounce's random numbers for the emitter sample
+R_WO = R_UEM + 3        # 3: its cosine-weighted direction (local frame) for the BSDF sample
+R_URR = R_WO + 3        # its Russian-roulette number
+R_P, R_NG, R_NS, R_FS, R_FT, R_WI = (R_URR + 1 + 3 * k for k in range(6))   # the vertex: point, normals,
+N_S = R_WI + 3                                                            # shading frame, wi (local)
+# int rows (after the traversal's): path state, bounce, item (-1: idle lane), previous vertex delta,
+# path goes on after this bounce, a next-event term is pending
+Q_H = N_Q_TRACE
+Q_DEPTH, Q_ITEM, Q_DELTA, Q_ALIVE, Q_NEE = Q_H + 1, Q_H + 2, Q_H + 3, Q_H + 4, Q_H + 5
+Q_MAT, Q_CONT = Q_H + 6, Q_H + 7        # the vertex's material row; the bounce scatters at the vertex
+N_Q = Q_CONT + 1
+#: items (pixel, sample) whose radiance a row keeps before summing them per pixel
+N_ITEMS = 4096
+
+
+def eligible(sa, mask, max_depth) -> bool:
+    """Can the packet tracer render this compiled scene with this effects mask and max_depth?
+
+    The packet tracer tracks no path classes: with diffuse vertices only, a contribution after n
+    vertices is emission (n = 0), direct lighting (1) or diffuse interreflection (>= 2), so the
+    image is :func:`radiance_path`'s when the mask keeps every one of those the depth allows."""
+    need = 1 << EMISSION
+    need |= (1 << DIRECT_LIGHTING) if max_depth >= 2 else 0
+    need |= (1 << DIFFUSE_INTERREFLECTION) if max_depth >= 3 else 0
+    tri = np.all(sa.prim_info[:, INFO_TYPE] == P_TRIANGLE) and not np.any(sa.prims[:, G_HASN] != 0.0)
+    return bool(mask & need == need and sa.env < 0 and len(sa.emitters) > 0
+                and np.all(sa.emitters[:, EM_TYPE] == E_AREA) and np.all(sa.materials[:, MAT_TYPE] == DIFFUSE)
+                and tri and lanes_only(sa.node_info))
+
+
+@block
+def new_buffers():
+    """A row's packet state (S, Q) and item radiances."""
+    return np.zeros(N_S * PK), np.zeros(N_Q * PK, dtype=np.int64), np.zeros(3 * N_ITEMS)
+
+
+@leaf
+def _get3(S, r, j):
+    return (S[r * PK + j], S[(r + 1) * PK + j], S[(r + 2) * PK + j])
+
+
+@leaf
+def _set3(S, r, j, v):
+    S[r * PK + j], S[(r + 1) * PK + j], S[(r + 2) * PK + j] = v[0], v[1], v[2]
+
+
+@leaf
+def _start(sa, S, Q, j, item, x0, y, w, spp, seed, sample0):
+    """Lane j starts the path of ``item`` (pixel x0 + item // spp, sample sample0 + item % spp):
+    ``pt._rows_path``'s camera ray and ``radiance_path``'s initial state."""
+    x = x0 + item // spp
+    s = sample0 + item % spp
+    key = y * w + x
+    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+    _set3(S, R_O, j, o)
+    _set3(S, R_O + 3, j, d)
+    S[(R_O + 6) * PK + j] = tmax
+    _set3(S, R_BETA, j, (1.0, 1.0, 1.0))
+    _set3(S, R_L, j, (0.0, 0.0, 0.0))
+    _set3(S, R_PP, j, o)
+    S[R_PPDF * PK + j] = 1.0
+    S[R_ETA * PK + j] = 1.0
+    Q[Q_H * PK + j] = np.int64(path_state(seed, key, s))
+    Q[Q_DEPTH * PK + j] = 0
+    Q[Q_DELTA * PK + j] = 1
+    Q[Q_ITEM * PK + j] = item
+
+
+@leaf
+def _nee(sa, S, Q, j, p, ng, frame, wi, mat, beta):
+    """``surface_path.nee_surface`` for lane j up to its visibility test: the term times beta waits
+    in R_C, its shadow ray in R_SO (tmax -1: no ray to test, the term counts as visible)."""
+    s, t, n = frame
+    em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
+        sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
+        S[R_UEM * PK + j], S[(R_UEM + 1) * PK + j], S[(R_UEM + 2) * PK + j])
+    if em < 0:
+        return
+    wo = to_local(dl, s, t, n)
+    f = bsdf_eval(mat, wi, wo)
+    if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+        return
+    o, d, tmax = shadow_ray(p, ng, q)
+    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))   # nee_class_share: 1
+    c = (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
+    _set3(S, R_C, j, (beta[0] * c[0], beta[1] * c[1], beta[2] * c[2]))
+    _set3(S, R_SO, j, o)
+    _set3(S, R_SO + 3, j, d)
+    S[(R_SO + 6) * PK + j] = tmax if tmax > 0.0 else -1.0
+    Q[Q_NEE * PK + j] = 1
+
+
+@leaf
+def _draw(S, Q):
+    """Every lane's random numbers of this bounce and its cosine-weighted direction, ahead of the
+    shading: they depend on the path state alone, and in a loop of their own the lanes' long
+    polynomial and square-root chains overlap instead of stalling each lane's shading in turn."""
+    for j in range(PK):
+        h = np.uint64(Q[Q_H * PK + j])
+        b = Q[Q_DEPTH * PK + j]
+        S[R_UEM * PK + j] = rand_at(h, dim(b, D_EM_SEL))
+        S[(R_UEM + 1) * PK + j] = rand_at(h, dim(b, D_EM_U1))
+        S[(R_UEM + 2) * PK + j] = rand_at(h, dim(b, D_EM_U2))
+        _set3(S, R_WO, j, square_to_cosine_hemisphere(rand_at(h, dim(b, D_BSDF_U1)), rand_at(h, dim(b, D_BSDF_U2))))
+        S[R_URR * PK + j] = rand_at(h, dim(b, D_RR))
+
+
+@leaf
+def _diffuse_sample(mat, wi, wo):
+    """``bsdf.bsdf_sample`` of a diffuse material, given the cosine-weighted direction ``wo`` its
+    (u1, u2) map to: the same twosided mirroring, checks and guard (so the same bits)."""
+    flip = mat[MAT_TWOSIDED] != 0.0 and wi[2] < 0.0
+    wz = -wi[2] if flip else wi[2]
+    pdf = wo[2] * INV_PI
+    w = (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2])
+    if wz <= 0.0 or pdf <= 0.0 or not (pdf < math.inf and abs(w[0] + w[1] + w[2]) < math.inf):
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, False
+    return (wo[0], wo[1], -wo[2] if flip else wo[2]), w, pdf, False
+
+
+@leaf
+def _emission(sa, S, Q, j, prim, p, ns, d, beta):
+    """Emission seen by the lane's segment, MIS-weighted against the next-event estimate before it."""
+    em = sa.prim_info[prim, INFO_EMITTER]
+    if em < 0:
+        return
+    le = eval_emitter(sa.emitters, em, ns, d)
+    if le[0] + le[1] + le[2] > 0.0:
+        w = 1.0
+        if Q[Q_DELTA * PK + j] == 0:
+            w = power_heuristic(S[R_PPDF * PK + j], emitter_pdf(sa.emitters, em, _get3(S, R_PP, j), p, ns))
+        S[R_L * PK + j] += beta[0] * le[0] * w
+        S[(R_L + 1) * PK + j] += beta[1] * le[1] * w
+        S[(R_L + 2) * PK + j] += beta[2] * le[2] * w
+
+
+@leaf
+def _shade_hit(sa, S, Q, j, max_depth):
+    """``radiance_path``'s bounce for lane j up to the next-event estimate: the surface interaction,
+    the emission it sees, and whether the path scatters there (Q_CONT, with its frame and wi)."""
+    Q[Q_ALIVE * PK + j] = 0
+    Q[Q_NEE * PK + j] = 0
+    Q[Q_CONT * PK + j] = 0
+    S[(R_SO + 6) * PK + j] = -1.0
+    prim = Q[Q_PRIM * PK + j]
+    if Q[Q_ITEM * PK + j] < 0 or prim < 0:          # idle, or escaped (no environment)
+        return
+    o, d = _get3(S, R_O, j), _get3(S, R_O + 3, j)
+    p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, S[(R_O + 6) * PK + j], S[S_U * PK + j], S[S_V * PK + j])
+    _emission(sa, S, Q, j, prim, p, ns, d, _get3(S, R_BETA, j))
+    if Q[Q_DEPTH * PK + j] + 1 >= max_depth:
+        return
+    s, tt = coordinate_system(ns)
+    _set3(S, R_WI, j, to_local((-d[0], -d[1], -d[2]), s, tt, ns))
+    _set3(S, R_P, j, p)
+    _set3(S, R_NG, j, ng)
+    _set3(S, R_NS, j, ns)
+    _set3(S, R_FS, j, s)
+    _set3(S, R_FT, j, tt)
+    Q[Q_MAT * PK + j] = sa.prim_info[prim, INFO_MAT]
+    Q[Q_CONT * PK + j] = 1
+
+
+@leaf
+def _shade_nee(sa, S, Q, j):
+    """The next-event estimate of lane j's vertex (pending its shadow ray)."""
+    if Q[Q_CONT * PK + j] == 0:
+        return
+    frame = (_get3(S, R_FS, j), _get3(S, R_FT, j), _get3(S, R_NS, j))
+    _nee(sa, S, Q, j, _get3(S, R_P, j), _get3(S, R_NG, j), frame, _get3(S, R_WI, j),
+         sa.materials[Q[Q_MAT * PK + j]], _get3(S, R_BETA, j))
+
+
+@leaf
+def _shade_next(sa, S, Q, j, rr_depth):
+    """Lane j's BSDF sample, next ray and Russian roulette; Q_ALIVE says whether the path goes on."""
+    if Q[Q_CONT * PK + j] == 0:
+        return
+    mat = sa.materials[Q[Q_MAT * PK + j]]
+    wi = _get3(S, R_WI, j)
+    wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, _get3(S, R_WO, j))
+    if not pdf > 0.0:
+        return
+    beta = _get3(S, R_BETA, j)
+    beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
+    eta = S[R_ETA * PK + j] * bsdf_eta(mat, wi, wo)
+    p, ng = _get3(S, R_P, j), _get3(S, R_NG, j)
+    d = to_world(wo, _get3(S, R_FS, j), _get3(S, R_FT, j), _get3(S, R_NS, j))
+    _set3(S, R_O, j, offset_origin(p, ng, d))
+    _set3(S, R_O + 3, j, d)
+    S[(R_O + 6) * PK + j] = math.inf
+    _set3(S, R_PP, j, p)
+    S[R_PPDF * PK + j] = pdf
+    S[R_ETA * PK + j] = eta
+    Q[Q_DELTA * PK + j] = np.int64(is_delta)
+    depth = Q[Q_DEPTH * PK + j] + 1
+    Q[Q_DEPTH * PK + j] = depth
+    bmax = max3(beta)
+    if depth >= rr_depth:
+        q = min(bmax * eta * eta, 0.95)
+        if S[R_URR * PK + j] >= q:             # rand_at(h, dim(depth - 1, D_RR))
+            return
+        beta = (beta[0] / q, beta[1] / q, beta[2] / q)
+    if not bmax > 0.0:
+        return
+    _set3(S, R_BETA, j, beta)
+    Q[Q_ALIVE * PK + j] = 1
+
+
+@leaf
+def _trace(sa, S, Q, ro, stack, any_hit):
+    """The lanes' rays at row ro: as a packet when the tree is one leaf; else ray by ray with the
+    scalar traversal (incoherent rays through a tree share too few nodes for a packet to pay)."""
+    if sa.node_info[0, 1] > 0:
+        packet_trace(sa.nodes, sa.node_info, S, Q, ro, stack, any_hit)
+        return
+    for j in range(PK):
+        o, d, tmax = _get3(S, ro, j), _get3(S, ro + 3, j), S[(ro + 6) * PK + j]
+        if any_hit:
+            Q[Q_HIT * PK + j] = 0
+            if tmax > 0.0:
+                Q[Q_HIT * PK + j] = np.int64(any_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0,
+                                                            tmax, stack, False, sa.materials) >= 0)
+        else:
+            Q[Q_PRIM * PK + j] = -1
+            if tmax > 0.0:
+                t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+                Q[Q_PRIM * PK + j] = prim
+                S[(ro + 6) * PK + j], S[S_U * PK + j], S[S_V * PK + j] = t, u, v
+
+
+@leaf
+def _finish(sa, S, Q, buf, nxt, nitems, x0, y, w, spp, seed, sample0):
+    """Add the visible next-event terms; a lane whose path ended stores its radiance and takes the
+    next item. Returns the next item and the number of busy lanes."""
+    busy = 0
+    for j in range(PK):
+        if Q[Q_NEE * PK + j] != 0 and Q[Q_HIT * PK + j] == 0:
+            for k in range(3):
+                S[(R_L + k) * PK + j] += S[(R_C + k) * PK + j]
+        item = Q[Q_ITEM * PK + j]
+        if item >= 0 and Q[Q_ALIVE * PK + j] == 0:
+            for k in range(3):
+                buf[3 * item + k] = S[(R_L + k) * PK + j]
+            Q[Q_ITEM * PK + j] = -1
+            S[(R_O + 6) * PK + j] = -1.0
+            if nxt < nitems:
+                _start(sa, S, Q, j, nxt, x0, y, w, spp, seed, sample0)
+                nxt += 1
+        busy += Q[Q_ITEM * PK + j] >= 0
+    return nxt, busy
+
+
+@noalloc
+def render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack):
+    """Row y of ``pt._rows_path``'s image (the mean of samples sample0 .. sample0+spp-1 per pixel
+    into out[y]), traced in packets; returns the number of non-finite samples dropped."""
+    w = out.shape[1]
+    per = max(1, (buf.shape[0] // 3) // spp)           # pixels whose items fit the buffer
+    inv = 1.0 / spp
+    nbad = 0
+    for x0 in range(0, w, per):
+        npx = min(per, w - x0)
+        nitems = npx * spp
+        nxt = 0
+        for j in range(PK):
+            Q[Q_ITEM * PK + j] = -1
+            S[(R_O + 6) * PK + j] = -1.0
+            if nxt < nitems:
+                _start(sa, S, Q, j, nxt, x0, y, w, spp, seed, sample0)
+                nxt += 1
+        busy = 1
+        while busy > 0:
+            _trace(sa, S, Q, R_O, stack, False)
+            _draw(S, Q)
+            for j in range(PK):                # one loop: three loops measured no faster
+                _shade_hit(sa, S, Q, j, max_depth)
+                _shade_nee(sa, S, Q, j)
+                _shade_next(sa, S, Q, j, rr_depth)
+            _trace(sa, S, Q, R_SO, stack, True)
+            nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, x0, y, w, spp, seed, sample0)
+        for xi in range(npx):                          # pt._rows_path's sum, in sample order
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            for si in range(spp):
+                c0, c1, c2 = buf[3 * (xi * spp + si)], buf[3 * (xi * spp + si) + 1], buf[3 * (xi * spp + si) + 2]
+                if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2):
+                    a0 += c0
+                    a1 += c1
+                    a2 += c2
+                else:
+                    nbad += 1
+            out[y, x0 + xi, 0] = a0 * inv
+            out[y, x0 + xi, 1] = a1 * inv
+            out[y, x0 + xi, 2] = a2 * inv
+    return nbad

@@ -1,0 +1,1 @@
+"""Acceleration structures: the BVH, its builder, SIMD leaf blocks and packet traversal."""

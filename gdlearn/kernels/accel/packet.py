@@ -1,0 +1,179 @@
+"""Packet traversal: the closest hit or any hit of ``PK`` rays at once, SIMD over the rays.
+
+The scalar traversal (:mod:`gdlearn.kernels.accel.bvh`) runs one ray at a time, SIMD over a leaf's
+lanes. Here a *packet* of rays -- the rays of ``PK`` independent paths at the same bounce, see
+:mod:`gdlearn.integrators.path.packet` -- walks the tree together: a node is entered when its box is
+hit by any ray of the packet that has not found a nearer hit, and each lane of a leaf is tested
+against all the rays in one branch-free loop that the compiler vectorises over the rays (no
+per-ray setup, reduction or branch, which cost the scalar traversal more than its arithmetic).
+Per ray and lane it is the scalar code's arithmetic (``bvh._lane_tuv``), and within a leaf the
+winner is the same integer minimum of (distance bits | lane), so with one leaf (small scenes: the
+Cornell box) every hit is the scalar code's, bit for bit. In a tree the packet may visit leaves in
+another order than a single ray would, which can only change the answer at an exact tie between
+leaves (coplanar faces).
+
+The packet lives in the rows of two flat arrays of the caller, ``S`` float64 and ``Q`` int64, one
+row of ``PK`` entries per quantity: element ``S[r * PK + j]`` is row r of ray j. A constant row
+stride lets the compiler prove that rows do not overlap (with a run-time stride it gave up
+vectorising). A ray set is 7 consecutive rows from ``ro``: origin, direction, tmax; a ray with
+tmax < 0 is idle and hits nothing. Only leaves of lanes (triangles, parallelograms) are supported:
+the caller checks :func:`lanes_only` once per scene.
+"""
+import math
+
+import numpy as np
+
+
+from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits, _fmax, _fmin
+from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META
+from gdlearn.kernels.jit import leaf
+
+#: rays per packet (64 float64 per row: 8 AVX-512 vectors)
+PK = 64
+
+# float rows used by the traversal: reciprocal directions, the hit's barycentrics, a leaf's best
+# lane (t, a, b) while it is tested; the ray sets themselves are the caller's (7 rows from ``ro``)
+S_IX, S_IY, S_IZ, S_U, S_V, S_LT, S_LA, S_LB = range(8)
+N_S_TRACE = 8
+# int rows: the hit primitive (-1: none), a leaf's best key, the any-hit flag
+Q_PRIM, Q_LKEY, Q_HIT = range(3)
+N_Q_TRACE = 3
+
+
+def lanes_only(node_info) -> bool:
+    """True when every primitive is in a lane (no sphere or disk): packets can trace the scene."""
+    leaves = node_info[node_info[:, 1] > 0]
+    return bool(np.all(leaves[:, 2] == leaves[:, 1]))
+
+
+@leaf
+def _lane_test(nodes, i, n8, S, Q, ro, k, any_hit):
+    """Lane ``i`` of a block (row stride n8) against the packet: with ``any_hit`` set the rays' hit
+    flags, else keep each ray's smallest key and that lane's t, a, b (rows S_L*)."""
+    p0x, p0y, p0z = nodes[i], nodes[i + n8], nodes[i + 2 * n8]
+    e1x, e1y, e1z = nodes[i + 3 * n8], nodes[i + 4 * n8], nodes[i + 5 * n8]
+    e2x, e2y, e2z = nodes[i + 6 * n8], nodes[i + 7 * n8], nodes[i + 8 * n8]
+    lim = nodes[i + ROW_LIM * n8]
+    for j in range(PK):
+        dx, dy, dz = S[(ro + 3) * PK + j], S[(ro + 4) * PK + j], S[(ro + 5) * PK + j]
+        pvx = dy * e2z - dz * e2y
+        pvy = dz * e2x - dx * e2z
+        pvz = dx * e2y - dy * e2x
+        inv = 1.0 / (e1x * pvx + e1y * pvy + e1z * pvz)
+        tx, ty, tz = S[ro * PK + j] - p0x, S[(ro + 1) * PK + j] - p0y, S[(ro + 2) * PK + j] - p0z
+        a = (tx * pvx + ty * pvy + tz * pvz) * inv
+        qx = ty * e1z - tz * e1y
+        qy = tz * e1x - tx * e1z
+        qz = tx * e1y - ty * e1x
+        b = (dx * qx + dy * qy + dz * qz) * inv
+        t = (e2x * qx + e2y * qy + e2z * qz) * inv
+        ok = ((a >= 0.0) & (b >= 0.0) & (a <= 1.0) & (b <= 1.0) & (a + b <= lim) & (t > 0.0)
+              & (t < S[(ro + 6) * PK + j]))
+        if any_hit:
+            Q[Q_HIT * PK + j] |= np.int64(ok)
+        else:
+            key = (_f64_bits(t) & _KEY_HIGH) | k | ((np.int64(ok) - 1) & _NO_HIT)
+            better = key < Q[Q_LKEY * PK + j]
+            Q[Q_LKEY * PK + j] = key if better else Q[Q_LKEY * PK + j]
+            S[S_LT * PK + j] = t if better else S[S_LT * PK + j]
+            S[S_LA * PK + j] = a if better else S[S_LA * PK + j]
+            S[S_LB * PK + j] = b if better else S[S_LB * PK + j]
+
+
+@leaf
+def _adopt(nodes, first, base, lanes, n8, S, Q, ro):
+    """Each ray's winner of a leaf becomes its hit (a parallelogram's (a, b) mapped to its triangle
+    as ``bvh._lane_prim`` does), and shortens its tmax."""
+    for j in range(PK):
+        key = Q[Q_LKEY * PK + j]
+        got = key != _NO_HIT
+        lane = min(key & _KEY_LOW, lanes - 1)          # in the block even without a hit
+        a, b = S[S_LA * PK + j], S[S_LB * PK + j]
+        meta = np.int64(nodes[base + lane + ROW_META * n8])
+        in_a = np.int64(a >= b)
+        quad = meta & K_QUAD
+        swap = quad & (((meta >> 1) & in_a) | ((meta >> 2) & (1 - in_a)))
+        x = abs(a - b) if quad != 0 else a
+        y = min(a, b) if quad != 0 else b
+        prim = first + (meta >> 3) + (quad & (1 - in_a))
+        Q[Q_PRIM * PK + j] = prim if got else Q[Q_PRIM * PK + j]
+        S[(ro + 6) * PK + j] = S[S_LT * PK + j] if got else S[(ro + 6) * PK + j]
+        S[S_U * PK + j] = (y if swap != 0 else x) if got else S[S_U * PK + j]
+        S[S_V * PK + j] = (x if swap != 0 else y) if got else S[S_V * PK + j]
+
+
+@leaf
+def _leaf(nodes, node_info, node, S, Q, ro, any_hit):
+    """Leaf ``node`` against the packet."""
+    first, base, lanes = node_info[node, 0], np.int64(node_info[node, 3]), node_info[node, 4]
+    n8 = np.int64(((lanes + LANES - 1) >> 3) << 3)
+    if not any_hit:
+        for j in range(PK):
+            Q[Q_LKEY * PK + j] = _NO_HIT
+    for k in range(lanes):
+        _lane_test(nodes, base + k, n8, S, Q, ro, k, any_hit)
+    if not any_hit:
+        _adopt(nodes, first, base, lanes, n8, S, Q, ro)
+
+
+@leaf
+def _box_any(nodes, k, S, Q, ro, any_hit):
+    """Does any ray of the packet (still looking) enter node k's box before its tmax? The scalar
+    ``bvh._box_hit`` per ray, including its 2-ulp widening."""
+    b = 6 * k
+    lx, ly, lz, hx, hy, hz = nodes[b], nodes[b + 1], nodes[b + 2], nodes[b + 3], nodes[b + 4], nodes[b + 5]
+    hit = np.int64(0)
+    for j in range(PK):
+        ox, oy, oz = S[ro * PK + j], S[(ro + 1) * PK + j], S[(ro + 2) * PK + j]
+        ix, iy, iz = S[S_IX * PK + j], S[S_IY * PK + j], S[S_IZ * PK + j]
+        t0, t1 = (lx - ox) * ix, (hx - ox) * ix
+        ty0, ty1 = (ly - oy) * iy, (hy - oy) * iy
+        tz0, tz1 = (lz - oz) * iz, (hz - oz) * iz
+        lo = _fmax(_fmax(_fmin(t0, t1), _fmin(ty0, ty1)), _fmax(_fmin(tz0, tz1), 0.0))
+        hi = _fmin(_fmin(_fmax(t0, t1), _fmax(ty0, ty1)), _fmin(_fmax(tz0, tz1), S[(ro + 6) * PK + j]))
+        looking = (Q[Q_HIT * PK + j] == 0) if any_hit else True
+        hit |= np.int64((lo <= hi * 1.0000000000000004) & looking)
+    return hit != 0
+
+
+@leaf
+def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
+    """Trace the packet's ray set at row ``ro`` (t in (0, tmax)). Closest hit: Q_PRIM (-1 on a miss)
+    and the hit's t (in the tmax row), S_U, S_V; ``any_hit``: Q_HIT is 1 for a blocked ray.
+    ``stack`` is the scalar traversal's (its first 64 entries)."""
+    for j in range(PK):
+        if any_hit:
+            Q[Q_HIT * PK + j] = 0
+        else:
+            Q[Q_PRIM * PK + j] = -1
+    if node_info[0, 1] > 0:                       # one leaf: no boxes
+        _leaf(nodes, node_info, 0, S, Q, ro, any_hit)
+        return
+    for r in range(3):                            # the slab tests' reciprocal directions
+        for j in range(PK):
+            dr = S[(ro + 3 + r) * PK + j]
+            S[(S_IX + r) * PK + j] = 1.0 / dr if dr != 0.0 else math.copysign(math.inf, dr)
+    sp = 0
+    node = 0
+    while True:
+        if node_info[node, 1] > 0:
+            _leaf(nodes, node_info, node, S, Q, ro, any_hit)
+        else:
+            a = node_info[node, 0]
+            if _box_any(nodes, a, S, Q, ro, any_hit):
+                stack[sp] = a + 1                 # the sibling is tested when it is popped
+                sp += 1
+                node = a
+                continue
+            if _box_any(nodes, a + 1, S, Q, ro, any_hit):
+                node = a + 1
+                continue
+        found = False
+        while sp > 0:
+            sp -= 1
+            node = stack[sp]
+            if _box_any(nodes, node, S, Q, ro, any_hit):
+                found = True
+                break
+        if not found:
+            break

@@ -1,0 +1,63 @@
+"""The numba recipe, written down once: every compiled function outside :mod:`gdlearn.reconstruct`
+is declared with one of these decorators (reconstruct, which imports nothing else from gdlearn,
+has its own ``reconstruct._jit.kernel``).
+
+All of them share three choices:
+
+* ``cache=True``: compiled code is kept on disk, keyed by the hash of gdlearn's sources
+  (:func:`gdlearn.source_hash`), so a process pays the JIT once per edit, not once per run.
+* ``error_model="numpy"``: a division by zero gives inf/NaN instead of raising. Compiled code
+  cannot recover from an exception in the middle of a render, while a non-finite value is caught
+  where it arises (a zero pdf, a grazing Jacobian) or, at the latest, by the row drivers, which
+  drop and count the sample: NaN or Inf never reach an image. (The python model also costs a
+  branch per division.)
+* float64 everywhere, no jitclass, no mutable globals (numba freezes globals at compile time).
+
+What differs is how a function is called:
+
+========================  =======================================================================
+decorator                 use it for
+========================  =======================================================================
+:func:`block`             a building block called from other compiled code, not inlined (BVH
+                          builds, set-up helpers, functions that allocate).
+:func:`inlined`           a small hot helper LLVM should inline into its caller (``forceinline``):
+                          a non-inlined call passes every tuple and array as dozens of scalars.
+:func:`leaf`              a hot helper that allocates nothing: inlined *and* compiled without
+                          numba's reference counting (``_nrt=False``). Reference counts on the
+                          scene's array views were the largest cost of the path kernels; numba
+                          refuses ``np.empty`` in such a function, which is the point.
+:func:`noalloc`           as :func:`leaf` but not inlined: a large allocation-free function (a
+                          whole path's radiance) that several kernels call.
+:func:`ir_inline`         numba-IR inlining (``inline="always"``): for functions whose arguments
+                          are typed per call site (a tuple of arrays of varying layout) or that
+                          return small tuples the caller unpacks.
+:func:`rows`              a parallel row driver (``parallel=True``, ``prange`` over rows): each
+                          row writes only its own pixels or a private buffer.
+========================  =======================================================================
+
+Each decorator works bare (``@leaf``) and with extra numba options (``@block(fastmath=True)``).
+"""
+from __future__ import annotations
+
+from numba import njit
+
+_BASE = dict(cache=True, error_model="numpy")
+
+
+def _recipe(**options):
+    def decorator(fn=None, **extra):
+        opts = {**_BASE, **options, **extra}
+        if fn is None:
+            return lambda f: njit(**opts)(f)
+        return njit(**opts)(fn)
+    return decorator
+
+
+block = _recipe()
+inlined = _recipe(forceinline=True)
+leaf = _recipe(forceinline=True, _nrt=False)
+noalloc = _recipe(_nrt=False)
+ir_inline = _recipe(inline="always")
+rows = _recipe(parallel=True)
+
+__all__ = ["block", "inlined", "leaf", "noalloc", "ir_inline", "rows"]

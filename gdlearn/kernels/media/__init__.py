@@ -1,0 +1,1 @@
+"""Homogeneous media: transmittance, free-flight sampling and phase functions."""
