@@ -19,6 +19,9 @@ import time
 SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
                  "halfvector+replay+reconnection")
 
+#: integrators that take --photons, --alpha and --radius
+PHOTON_INTEGRATORS = ("sppm", "ppm")
+
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("render", help="render a scene file to an image",
@@ -42,6 +45,12 @@ def add_parser(subparsers) -> None:
                    help="gpt only: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
                         "manifold exploration where the effects plan renders caustics through specular chains the "
                         "walk can move, else halfvector+replay+reconnection)")
+    # photon estimators (sppm, ppm); a pass takes 2 camera samples per pixel, so --spp counts passes too
+    p.add_argument("--photons", type=int, default=None, metavar="N",
+                   help="sppm/ppm: light paths emitted per pass (default 100000)")
+    p.add_argument("--alpha", type=float, default=None, help="sppm/ppm: radius reduction alpha (default 0.7)")
+    p.add_argument("--radius", type=float, default=None, metavar="R",
+                   help="sppm/ppm: initial radius in scene units (default: the pixel footprint)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -81,6 +90,14 @@ def run(args) -> int:
             print(f"gdlearn render: --shift applies to --integrator gpt, not {args.integrator}", file=sys.stderr)
             return 2
         opts["shift"] = args.shift
+    photon_opts = {"photons_per_pass": args.photons, "alpha": args.alpha, "radius": args.radius}
+    photon_opts = {k: v for k, v in photon_opts.items() if v is not None}
+    if photon_opts:
+        if args.integrator not in PHOTON_INTEGRATORS:
+            print(f"gdlearn render: --photons/--alpha/--radius apply to --integrator "
+                  f"{'/'.join(PHOTON_INTEGRATORS)}, not {args.integrator}", file=sys.stderr)
+            return 2
+        opts.update(photon_opts)
     try:
         integ = make(args.integrator, scene, **opts)
     except EffectsError as err:

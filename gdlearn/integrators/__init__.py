@@ -14,6 +14,8 @@ REGISTRY = {
     "pt": "gdlearn.integrators.path.pt:PathTracer",
     "gpt-replay": "gdlearn.integrators.path.gpt_replay:ReplayGPT",
     "gpt": "gdlearn.integrators.path.gpt:GradientPathTracer",
+    "sppm": "gdlearn.integrators.photon.sppm:SPPM",
+    "ppm": "gdlearn.integrators.photon.sppm:PPM",
 }
 
 
