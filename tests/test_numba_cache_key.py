@@ -28,7 +28,7 @@ def test_cache_folder_follows_the_sources(tmp_path):
     cache = tmp_path / "cache"
     first = _cache_dir(copy, cache)
     assert _cache_dir(copy, cache) == first                      # deterministic
-    bsdf = copy / "gdlearn" / "kernels" / "bsdf.py"
+    bsdf = copy / "gdlearn" / "kernels" / "bsdf" / "dispatch.py"
     bsdf.write_text(bsdf.read_text() + "\n# an edit of a callee only\n")
     assert _cache_dir(copy, cache) != first                      # any edit: a fresh cache
 
