@@ -14,13 +14,19 @@ import pytest
 
 from gdlearn.io import read_image
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "scenes", "cornell-box.xml")
 
 
 def _cli(*args, **kw):
     return subprocess.run([sys.executable, "-m", "gdlearn", "render", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=600, **kw)
+                          text=True, timeout=SUBPROCESS_TIMEOUT, **kw)
 
 
 def test_render_writes_every_format_and_buffers(tmp_path):
