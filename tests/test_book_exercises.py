@@ -15,6 +15,12 @@ import pytest
 
 from gdlearn.teaching.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
+
 ROOT = Path(__file__).resolve().parent.parent
 EXERCISES = list_exercises()
 
@@ -35,7 +41,7 @@ def _check(name: str, solution: bool, exercises_dir: Path | None = None):
     code = ("import pathlib, sys; import gdlearn.teaching.exercises as e; " + patch +
             f"r = e.check({name!r}, solution={solution}); print(r.text()); sys.exit(0 if r.ok else 1)")
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(), capture_output=True,
-                         text=True, timeout=300)
+                         text=True, timeout=SUBPROCESS_TIMEOUT)
     return res.returncode, res.stdout + res.stderr
 
 
@@ -56,7 +62,7 @@ def test_solution_passes_its_exercise_tests(name):
     res = subprocess.run([sys.executable, "-m", "pytest", str(EXERCISES_DIR / name), "-q", "-p",
                           "no:cacheprovider", "-o", "addopts=", "--rootdir", str(EXERCISES_DIR)],
                          cwd=ROOT, env=_env(**{TARGET_ENV: "solution"}), capture_output=True, text=True,
-                         timeout=300)
+                         timeout=SUBPROCESS_TIMEOUT)
     assert res.returncode == 0, f"the solution of {name} fails its tests:\n{res.stdout[-3000:]}"
 
 

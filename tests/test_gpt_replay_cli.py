@@ -11,13 +11,19 @@ import numpy as np
 from gdlearn.io import read_image
 from gdlearn.reconstruct import control_variates, poisson_l2
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "scenes", "cornell-box.xml")
 
 
 def _cli(*args):
     return subprocess.run([sys.executable, "-m", "gdlearn", "render", SCENE, "--set", "res=12", "--spp", "4",
-                           "--no-progress", *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
+                           "--no-progress", *args], cwd=ROOT, capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT)
 
 
 def test_recon_writes_the_reconstruction_of_the_written_buffers(tmp_path):

@@ -21,6 +21,12 @@ LITERAL_ALGORITHM_1 = '''
 import numpy as np
 from gdlearn.reconstruct import control_variates
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
+
 def accumulate(radiance, width, height, spp, seed, dims=4):
     rng = np.random.default_rng(seed)
     P, Gx, Gy = np.zeros((height, width)), np.zeros((height, width)), np.zeros((height, width))
@@ -72,7 +78,7 @@ def _check(folder: Path) -> tuple[int, str]:
             "sys.exit(0 if r.ok else 1)")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
-                         timeout=300)
+                         timeout=SUBPROCESS_TIMEOUT)
     return res.returncode, res.stdout + res.stderr
 
 

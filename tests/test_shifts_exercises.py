@@ -22,6 +22,12 @@ RECONNECTION = '''
 import math
 import numpy as np
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
+
 def reconnection_jacobian(x_b, x_b_offset, y, n_y):
     d, do = np.subtract(y, x_b), np.subtract(y, x_b_offset)
     d2, do2 = float(d @ d), float(do @ do)
@@ -86,7 +92,7 @@ def _check(folder: Path, name: str) -> tuple[int, str]:
             "sys.exit(0 if r.ok else 1)")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
-                         timeout=300)
+                         timeout=SUBPROCESS_TIMEOUT)
     return res.returncode, res.stdout + res.stderr
 
 

@@ -7,6 +7,8 @@
   z-scores with both estimates' standard errors, Bonferroni bound, relative bias of the image mean).
 * :mod:`gdlearn.crosscheck.store`: the cached reference files in ``tests/references/`` (scene hash,
   settings, staleness check) and the list of reference cases.
+* :mod:`gdlearn.crosscheck.fuzz`: random scenes of the documented subset rendered by both renderers and
+  compared block by block; a failure is shrunk to a minimal scene (``python -m gdlearn.crosscheck fuzz``).
 
 Importing this package does not import Mitsuba; only the functions that render do.
 """

@@ -54,7 +54,8 @@ def shipped_scenes(root: Path = ROOT) -> list[str]:
 
 def reference_cases(root: Path = ROOT) -> list[RefCase]:
     """Every shipped scene with its own settings, plus the direct-only cases: ``--effects direct`` on
-    the Cornell box and ``direct,single-scattering`` on the fog box, which must equal Mitsuba's
+    the Cornell box and ``direct,single-scattering`` on the fog box and on the medium cube (a bounded medium lit from
+    outside), which must equal Mitsuba's
     ``max_depth = 2`` (emitters seen directly + one bounce of direct lighting, where a medium
     scattering vertex counts as a bounce in ``volpath``)."""
     cases = []
@@ -64,7 +65,7 @@ def reference_cases(root: Path = ROOT) -> list[RefCase]:
         cases.append(RefCase(name, rel))
         if stem == "cornell-box":
             cases.append(RefCase(f"{stem}.direct", rel, {"max_depth": 2}, ("direct",)))
-        if stem == "fog-box":
+        if stem in ("fog-box", "medium-cube"):
             cases.append(RefCase(f"{stem}.direct", rel, {"max_depth": 2},
                                  ("direct", "single-scattering")))
     return cases

@@ -11,7 +11,8 @@ Shapes (Mitsuba 3 shape plugins): ``rectangle`` = [-1,1]^2 at z=0 with normal +z
 [-1,1]^3; ``disk`` = unit disk at z=0, normal +z; ``sphere`` = ``center`` (0,0,0) and ``radius`` (1)
 folded into ``to_world`` as ``to_world @ T(center) @ S(radius)``; ``obj``/``ply`` meshes are read by
 :mod:`.meshio` and stored in world space (vertex normals unless ``face_normals``). A shape without a
-bsdf gets Mitsuba's default, diffuse 0.5.
+bsdf gets Mitsuba's default: diffuse 0.5, or diffuse 0 (black) when the shape carries an area
+emitter (Mitsuba 3's ``Shape`` constructor sets ``reflectance`` to 0 for emitters).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from gdlearn.scene import plugins
 from gdlearn.scene.meshio import MeshError, read_obj, read_ply, transform_mesh, triangle_areas, vertex_normals
-from gdlearn.scene.model import BSDF, Scene, SceneError, Shape, Source
+from gdlearn.scene.model import BSDF, Scene, SceneError, Shape, Source, rgb
 from gdlearn.scene.transforms import parse_transform, scale, translate
 from gdlearn.scene.xmlvalues import VALUE_TAGS, Node, Props, collect_defaults, parse_xml, substitute
 
@@ -247,7 +248,12 @@ class _Loader:
         if len(bsdfs) > 1:
             raise SceneError(self.path, bsdfs[1][1].line, "a shape has more than one bsdf",
                              "a shape has exactly one bsdf: remove the others")
-        s.bsdf = bsdfs[0][0] if bsdfs else BSDF()   # Mitsuba's default: diffuse, reflectance 0.5
+        if bsdfs:
+            s.bsdf = bsdfs[0][0]
+        elif s.emitter is not None:   # Mitsuba's default for an emitting shape: a black diffuse
+            s.bsdf = BSDF(reflectance=rgb(0.0))
+        else:                         # Mitsuba's default: diffuse, reflectance 0.5
+            s.bsdf = BSDF()
 
     def _set_medium(self, s: Shape, name, medium, node, where):
         if name not in ("interior", "exterior"):

@@ -159,7 +159,8 @@ class Shape:
     Analytic shapes live in object space and are placed by ``to_world`` (a sphere's ``center`` and
     ``radius`` are folded into ``to_world`` by the loader). Meshes carry world-space ``vertices``
     (V x 3 float64), ``faces`` (F x 3 int32) and optional per-vertex ``normals`` (V x 3) when
-    ``face_normals`` is false. ``bsdf`` is never None after loading (Mitsuba's default: diffuse 0.5).
+    ``face_normals`` is false. ``bsdf`` is never None after loading (Mitsuba's default: diffuse 0.5; black, diffuse 0, on a
+    shape with an area emitter).
     ``interior`` / ``exterior`` are the media on the two sides (None = vacuum).
     """
     type: str

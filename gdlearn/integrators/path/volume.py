@@ -18,7 +18,9 @@ Rules taken from volpath (they change the image, so they follow Mitsuba exactly)
 * a medium scattering event counts as a bounce; NEE happens at a vertex only while
   ``depth + 1 < max_depth``;
 * shadow rays pass null interfaces and accumulate the transmittance of every medium they cross; any
-  other surface blocks them.
+  other surface blocks them. After each crossing the ray is aimed again at the emitter point from its
+  new, pushed-off origin (a short ray would otherwise run past the SHADOW_EPS
+  slack into the emitter's own surface and count as blocked).
 
 Random numbers: the layout of :mod:`gdlearn.integrators.path.surface`, indexed by the *segment* number
 (every loop iteration, null crossings included, takes a fresh block of ``DIMS_PER_BOUNCE``).
@@ -107,10 +109,26 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
         hp, hng, hns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
         medium = next_medium(sa.prim_info, prim, medium, d, hng)
         o = offset_origin(hp, hng, d)
-        remaining -= t
+        # aimed again at q from the pushed-off origin (as shadow_ray does for the first segment): the
+        # push moves o off the line p -> q by ~1e-7, so keeping d and "remaining -= t" let a short
+        # or grazing ray run past its SHADOW_EPS slack into q's own surface (an area emitter), which
+        # then counted as a blocker
+        d, remaining = _aim(o, q)
         if remaining <= 0.0 or max3(tr) == 0.0:
             return tr
     return tr
+
+
+@inlined
+def _aim(o, q):
+    """(unit direction, length) of a shadow ray from ``o`` that stops just short of ``q``: the
+    length is |q - o| shortened by SHADOW_EPS (:func:`gdlearn.kernels.scene_query.shadow_ray`)."""
+    dv = (q[0] - o[0], q[1] - o[1], q[2] - o[2])
+    dist = math.sqrt(dot(dv, dv))
+    if not dist > 0.0:
+        return (0.0, 0.0, 1.0), 0.0
+    inv = 1.0 / dist
+    return (dv[0] * inv, dv[1] * inv, dv[2] * inv), dist * (1.0 - SHADOW_EPS)
 
 
 @leaf

@@ -38,8 +38,8 @@ an offset can reach a wanted class the base cannot.
 import math
 
 
-from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lobe_class,
-                                  sampled_lobe_class, vertex_class)
+from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_is_delta_only, bsdf_sample, lobe_class, nee_class_share,
+                                           nee_classes, sampled_lobe_class, vertex_class)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.integrators.path.gpt_surface.vertex import (ALIVE, BROKEN_LOBE_CLASS, BROKEN_MANIFOLD_JACOBIAN,
@@ -127,6 +127,26 @@ def _emission_pairs(sa, of, oi, diff, cb, cfg):
 
 
 @noalloc
+def _nee_share(mat, state, ns, wi_world, p, q, cfg):
+    """The share of a next-event term at p (towards the light point q) that the effects mask keeps:
+    ``surface_path``'s rule (:func:`gdlearn.kernels.bsdf.dispatch.nee_class_share`: a rough plastic's term is
+    split between its coating and base classes; 1 or 0 for every other material)."""
+    c_coat, c_rest = nee_classes(mat, cfg.threshold)
+    want_coat = _wanted(cfg, pc_push(state, c_coat))
+    want_rest = _wanted(cfg, pc_push(state, c_rest))
+    if want_coat == want_rest:
+        return 1.0 if want_coat else 0.0
+    dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+    n = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+    if not n > 0.0:
+        return 0.0
+    s, t = coordinate_system(ns)
+    wi = to_local(wi_world, s, t, ns)
+    wo = to_local((dv[0] / n, dv[1] / n, dv[2] / n), s, t, ns)
+    return nee_class_share(mat, wi, wo, want_coat, want_rest)
+
+
+@noalloc
 def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every offset by
     reconnecting to the same light point (for a constant / directional emitter: the same direction).
@@ -144,16 +164,17 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
             if (oi[k, I_ESCAPED] == 1 or bsdf_is_delta_only(mat_o)) and cfg.broken != BROKEN_UNPAIRED:
                 unpaired(diff, k, cb)
                 continue
-            if _wanted(cfg, pc_push(oi[k, I_STATE], vertex_class(mat_o, cfg.threshold))):
+            po = get3(of, k, F_POS)
+            qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
+            share = _nee_share(mat_o, oi[k, I_STATE], get3(of, k, F_NS), get3(of, k, F_WI), po, qo, cfg)
+            if share > 0.0:
                 if oi[k, I_RECONN] == MERGED:
                     no = nb
                 else:
-                    po = get3(of, k, F_POS)
-                    qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
                     v = vis if oi[k, I_RECONN] == JOINED else VIS_UNKNOWN
                     no, _ = nee_at_vis(sa, em, qo, nq, po, get3(of, k, F_NG), get3(of, k, F_NS), get3(of, k, F_WI),
                                        mat_o, stack, v)
-                co = mul3(get3(of, k, F_BETA), no)
+                co = sc3(mul3(get3(of, k, F_BETA), no), share)
         _pair(diff, of, oi, k, co, cb, cfg)
 
 
@@ -255,8 +276,9 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, 
     if em_b >= 0:
         nb, vis = nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, VIS_UNKNOWN)
     cb = (0.0, 0.0, 0.0)
-    if _wanted(cfg, pc_push(state, vertex_class(mat, cfg.threshold))):
-        cb = mul3(beta, nb)
+    share = _nee_share(mat, state, ns, wi_world, p, q, cfg)
+    if share > 0.0:
+        cb = sc3(mul3(beta, nb), share)
     _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack)
     return cb
 

@@ -180,8 +180,15 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
         hp, hng, _ = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
         medium = next_medium(sa.prim_info, prim, medium, d, hng)
         o = offset_origin(hp, hng, d)
-        remaining -= t
-        rem_true -= t
+        # aimed again at q from the pushed-off origin (volume_path.shadow_transmittance): the push
+        # moves o off the line p -> q, and a short or grazing segment would then run past the
+        # SHADOW_EPS slack into q's own surface
+        dv = (q[0] - o[0], q[1] - o[1], q[2] - o[2])
+        rem_true = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+        if not rem_true > 0.0:
+            break
+        d = (dv[0] / rem_true, dv[1] / rem_true, dv[2] / rem_true)
+        remaining = rem_true if collide else rem_true * (1.0 - SHADOW_EPS)
         if remaining <= 0.0:
             break
     return False, lt, lp, medium
