@@ -24,7 +24,8 @@ import pytest
 from numba import njit
 
 from gdlearn.integrators import make
-from gdlearn.integrators.path.params import GptParams
+from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, GptParams, NextVertex, Pixel
+from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
 from gdlearn.kernels.bsdf.dispatch import bsdf_sample, lobe_class, sampled_lobe_class
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.camera import camera_ray
@@ -102,7 +103,7 @@ def _shift(sa, cfg, fx, fy, x, w, h, k, n, rec, irec, out, iout, stack):
     of = np.zeros((4, NF))
     oi = np.zeros((4, NI), dtype=np.int64)
     stats = np.zeros(N_STATS, dtype=np.int64)
-    _start_offsets(sa, fx, fy, x, 0, w, h, of, oi, stack)
+    _start_offsets(sa, Pixel(fx, fy, x, 0, w, h), of, oi, stack)
     _store(of, oi, k, 1, out, iout)
     for j in range(1, n):
         if oi[k, I_ESCAPED] == 1 or irec[j, 0] == 0:
@@ -119,13 +120,16 @@ def _shift(sa, cfg, fx, fy, x, w, h, k, n, rec, irec, out, iout, stack):
         ns2 = (rec[j + 1, 6], rec[j + 1, 7], rec[j + 1, 8])
         d2 = (p2[0] - p[0], p2[1] - p[1], p2[2] - p[2])
         cls, delta, pdf = int(rec[j, R_CLS]), rec[j, R_DELTA] > 0.5, rec[j, R_PDF]
+        ns = (rec[j, 6], rec[j, 7], rec[j, 8])
+        # the recorded base vertex x_j and its next vertex x_{j+1}, as the kernels bundle them
+        bv = BaseVertex(VB_SURFACE, p, ng, ns, irec[j, 1], -1, mat_b, wi, wo, d2, (1.0, 1.0, 1.0), pdf, delta, cls,
+                        cls, us)
+        nx = NextVertex(hit2, EV_SURFACE if hit2 else EV_ESCAPE, prim2, p2, ng2, ns2, d2, -1,
+                        cls_next_of(sa, hit2, prim2, cfg), False)
         if is_mixed(policy):
-            ns = (rec[j, 6], rec[j, 7], rec[j, 8])
-            shift_segment_mixed(sa, k, of, oi, cfg, cls, mat_b, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2,
-                                p2, ng2, ns2, stats, stack)
+            shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack)
         else:
-            _shift_segment(sa, k, of, oi, cfg, cls, cls_next_of(sa, hit2, prim2, cfg), p, wi, wo, pdf,
-                           delta, us, hit2, prim2, p2, ng2, ns2, d2, stats, stack)
+            _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack)
         if oi[k, I_ALIVE] != ALIVE:
             return j, -1, True
         # the offset's segment leaving its vertex j: directions in its own frame, density, lobe kind

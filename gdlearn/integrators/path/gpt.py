@@ -49,7 +49,7 @@ from gdlearn.shifts.manifold import SH_WIDTH
 from gdlearn.shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION, POLICY_REPLAY,
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
-from gdlearn.integrators.path.params import GptParams
+from gdlearn.integrators.path.params import GptParams, PathRng, Pixel
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup, compile_by_tracing
@@ -111,9 +111,11 @@ def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
                 if cfg.policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
-                    c = replay_sample(sa, False, fx, fy, x, y, w, h, seed, key, s, cfg, diff, st, stack)
+                    c = replay_sample(sa, False, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, diff, st,
+                                      stack)
                 else:
-                    c = gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg, of, oi, diff, st, stack, mtab, cf, ci)
+                    c = gpt_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff, st, stack,
+                                   mtab, cf, ci)
                 if not finite_sample(c, diff):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                     continue

@@ -37,7 +37,8 @@ REPLAY_WEIGHT = 0.5
 
 
 @noalloc
-def _radiance(sa, volume, fx, fy, seed, key, s, cfg, stack):
+def _radiance(sa, volume, fx, fy, rng, cfg, stack):
+    seed, key, s = rng.seed, rng.key, rng.s
     o, d, tmax = camera_ray(sa.camera, fx, fy)
     if volume:
         return radiance_volpath(sa, o, d, tmax, seed, key, s, cfg.max_depth, cfg.rr_depth, cfg.mask, cfg.threshold, stack)
@@ -45,13 +46,14 @@ def _radiance(sa, volume, fx, fy, seed, key, s, cfg, stack):
 
 
 @noalloc
-def replay_sample(sa, volume, fx, fy, x, y, w, h, seed, key, s, cfg, diff, stats,
-                  stack):
-    """One base path through film point (fx, fy) of pixel (x, y) and its four replayed offsets (module
-    docstring); ``diff`` (8, 3) as :func:`gdlearn.integrators.path.gpt_surface.lockstep.gpt_sample`'s: [k] D_k, [4 + k] S_k.
+def replay_sample(sa, volume, px, rng, cfg, diff, stats, stack):
+    """One base path through film point (fx, fy) of pixel (x, y) (``px``:
+    :class:`~gdlearn.integrators.path.params.Pixel`, random numbers ``rng``: ``PathRng``) and its four
+    replayed offsets (module docstring); ``diff`` (8, 3) as :func:`gdlearn.integrators.path.gpt_surface.lockstep.gpt_sample`'s: [k] D_k, [4 + k] S_k.
     Returns the base radiance. ``volume``: trace with ``volpath`` (media, null interfaces)."""
+    fx, fy, x, y, w, h = px.fx, px.fy, px.x, px.y, px.w, px.h
     diff[:] = 0.0
-    base = _radiance(sa, volume, fx, fy, seed, key, s, cfg, stack)
+    base = _radiance(sa, volume, fx, fy, rng, cfg, stack)
     wd = 1.0 if cfg.broken == BROKEN_MIS else REPLAY_WEIGHT
     ws = 1.0 if cfg.broken == BROKEN_PRIMAL else wd
     for k in range(4):
@@ -59,7 +61,7 @@ def replay_sample(sa, volume, fx, fy, x, y, w, h, seed, key, s, cfg, diff, stats
             continue
         ox, oy = offset_film_position(fx, fy, k)
         # the same key: the base pixel's random numbers, replayed through the neighbour (Eq. 6-7)
-        off = _radiance(sa, volume, ox, oy, seed, key, s, cfg, stack)
+        off = _radiance(sa, volume, ox, oy, rng, cfg, stack)
         record(stats, SHIFT_REPLAY, True)
         for c in range(3):
             diff[k, c] = wd * (off[c] - base[c])

@@ -66,6 +66,8 @@ from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIF
                                    SHIFT_RECONNECT, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
+from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, NextVertex
 
 ONE3 = (1.0, 1.0, 1.0)
 
@@ -76,8 +78,10 @@ def _wanted(cfg, state):
 
 
 @noalloc
-def _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack):
-    """The pixel shift (Eq. 3): each neighbour's camera ray with the base's sub-pixel jitter."""
+def _start_offsets(sa, px, of, oi, stack):
+    """The pixel shift (Eq. 3): each neighbour's camera ray with the base's sub-pixel jitter (``px``:
+    :class:`~gdlearn.integrators.path.params.Pixel`)."""
+    fx, fy, x, y, w, h = px.fx, px.fy, px.x, px.y, px.w, px.h
     for k in range(4):
         if not neighbour_inside(x, y, k, w, h):
             oi[k, I_ALIVE] = OUTSIDE
@@ -179,9 +183,11 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
 
 
 @noalloc
-def _shift_segment(sa, k, of, oi, cfg, cls_b, cls_next, p, wi, wo, pdf, delta, us, hit2, prim2, p2, ng2,
-                   ns2, d2, stats, stack):
-    """Shift offset k's segment leaving its vertex i (base: wi -> wo, next vertex p2 or escape)."""
+def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
+    """Shift offset k's segment leaving its vertex i (base vertex ``bv``: wi -> wo, decided by its class
+    ``bv.cls_s``; next vertex ``nx``: p2 or escape, of class ``nx.cls``)."""
+    cls_b, cls_next = bv.cls_s, nx.cls
+    hit2, prim2, p2, ng2, ns2 = nx.hit, nx.prim, nx.p, nx.ng, nx.ns
     if oi[k, I_ESCAPED] == 1:
         record(stats, SHIFT_FAIL, False)
         oi[k, I_ALIVE] = FAILED
@@ -194,8 +200,7 @@ def _shift_segment(sa, k, of, oi, cfg, cls_b, cls_next, p, wi, wo, pdf, delta, u
         return
     p_o = get3(of, k, F_POS)
     ng_o = get3(of, k, F_NG)
-    wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, p, wi, wo, pdf, delta, us[0],
-                                                     us[1], us[2], p2, ng2, cfg, stack)
+    wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack)
     if ok and action == SHIFT_RECONNECT:
         set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
         oi[k, I_RECONN] = JOINED
@@ -260,9 +265,11 @@ def _roulette(of, oi, beta, eta, u):
 
 
 @noalloc
-def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, of, oi, diff, cfg, stack):
-    """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers) and its
-    shifts (:func:`_nee_pairs`); returns the base contribution."""
+def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, diff, cfg, stack):
+    """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers, ``rng``:
+    :class:`~gdlearn.integrators.path.params.PathRng`) and its shifts (:func:`_nee_pairs`); returns the base
+    contribution."""
+    seed, key, s = rng.seed, rng.key, rng.s
     n_em = sa.emitters.shape[0]
     u_sel = rand(seed, key, s, dim(depth, D_EM_SEL))
     em_b, q, nq, _, _, _, _, _, _ = sample_emitter(
@@ -284,12 +291,14 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, 
 
 
 @block
-def _shift_offsets(sa, of, oi, cfg, mat, p, ng, ns, wi, wo, weight, pdf, delta, cls_b, cls_s, us, hit2, prim2, p2,
-                   ng2, ns2, d2, stats, stack, mtab, m, cf, ci):
-    """Extend every live offset by the segment the base just sampled (p -> p2 along d2). ``m`` > 0: the
+def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
+    """Extend every live offset by the segment the base just sampled, x_b = ``bv.x`` -> x_{b+1} = ``nx.p``
+    along ``nx.d`` (:class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``). ``m`` > 0: the
     segment starts a qualifying specular chain of length m (cf, ci: :func:`gpt_manifold.lookahead_chain`),
     and free offsets take the manifold shift. ``cls_b``: the base lobe's effect class; ``cls_s``: its
-    class for the shift decisions (a function of the path, :mod:`gdlearn.shifts.policy`)."""
+    class for the shift decisions (a function of the path, :mod:`gdlearn.shifts.policy`): ``bv.cls_b``,
+    ``bv.cls_s``."""
+    cls_s = bv.cls_s
     for k in range(4):
         if oi[k, I_ALIVE] != ALIVE:
             continue
@@ -302,22 +311,20 @@ def _shift_offsets(sa, of, oi, cfg, mat, p, ng, ns, wi, wo, weight, pdf, delta, 
                 record(stats, SHIFT_FAIL, False)
                 oi[k, I_ALIVE] = FAILED
                 continue
-            ok = manifold_offset(sa, mtab, k, of, oi, m, cf, ci, p, mat_o, pdf, cfg,
+            ok = manifold_offset(sa, mtab, k, of, oi, m, cf, ci, bv.x, mat_o, bv.pdf, cfg,
                                  cfg.broken == BROKEN_MANIFOLD_JACOBIAN, stack)
             record(stats, SHIFT_MANIFOLD, ok)
             if not ok:
                 oi[k, I_ALIVE] = FAILED
             continue
         if oi[k, I_RECONN] != FREE:
-            follow_base(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, cfg)
+            follow_base(sa, k, of, oi, bv, cfg)
             if oi[k, I_ALIVE] == ALIVE:
-                set_hit(sa, of, oi, k, hit2, prim2, p2, ng2, ns2, d2)
+                set_hit(sa, of, oi, k, nx.hit, nx.prim, nx.p, nx.ng, nx.ns, nx.d)
         elif is_mixed(cfg.policy):
-            shift_segment_mixed(sa, k, of, oi, cfg, cls_s, mat, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2,
-                                p2, ng2, ns2, stats, stack)
+            shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack)
         else:
-            _shift_segment(sa, k, of, oi, cfg, cls_s, cls_next_of(sa, hit2, prim2, cfg), p, wi, wo, pdf,
-                           delta, us, hit2, prim2, p2, ng2, ns2, d2, stats, stack)
+            _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack)
 
 
 @leaf
@@ -334,16 +341,17 @@ def cls_next_of(sa, hit2, prim2, cfg):
 
 
 @block
-def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
-               of, oi, diff, stats, stack, mtab, cf, ci):
-    """One base path through film point (fx, fy) of pixel (x, y) and its four shifts. Returns the
+def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
+    """One base path through film point (fx, fy) of pixel (x, y) (``px``:
+    :class:`~gdlearn.integrators.path.params.Pixel`, random numbers ``rng``: ``PathRng``) and its four shifts. Returns the
     base radiance (the primal sample); ``diff`` (8, 3): ``diff[k]`` receives the gradient sample of
     shift k (right, left, down, up), zero for a shift outside the image, and ``diff[4 + k]`` the
     MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`)."""
+    seed, key, s = rng.seed, rng.key, rng.s
     diff[:] = 0.0
-    o, d, tmax = camera_ray(sa.camera, fx, fy)
+    o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
     hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
-    _start_offsets(sa, fx, fy, x, y, w, h, of, oi, stack)
+    _start_offsets(sa, px, of, oi, stack)
     beta = ONE3
     eta = 1.0
     prev_p, prev_pdf, prev_delta = o, 1.0, True
@@ -365,7 +373,7 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
         wi_world = (-d[0], -d[1], -d[2])
         wi = to_local(wi_world, sf, tf, ns)
         if not bsdf_is_delta_only(mat) and n_em > 0:
-            cb = _next_event(sa, p, ng, ns, wi_world, mat, beta, state, seed, key, s, depth, of, oi, diff, cfg, stack)
+            cb = _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, diff, cfg, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
         u_lobe = rand(seed, key, s, dim(depth, D_LOBE))
         u1 = rand(seed, key, s, dim(depth, D_BSDF_U1))
@@ -377,13 +385,16 @@ def gpt_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
         cls_s = cls_b if cfg.broken == BROKEN_LOBE_CLASS else lobe_class(mat, delta, cfg.threshold)
         d2 = to_world(wo, sf, tf, ns)
         hit2, _, prim2, p2, ng2, ns2, _ = intersect(sa, offset_origin(p, ng, d2), d2, 0.0, math.inf, stack)
+        # x_b and x_{b+1} of the segment the offsets shift next (params.BaseVertex, NextVertex)
+        bv = BaseVertex(VB_SURFACE, p, ng, ns, prim, -1, mat, wi, wo, d2, weight, pdf, delta, cls_b, cls_s,
+                        (u_lobe, u1, u2))
+        nx = NextVertex(hit2, EV_SURFACE if hit2 else EV_ESCAPE, prim2, p2, ng2, ns2, d2, -1,
+                        cls_next_of(sa, hit2, prim2, cfg), False)
         m = 0
         if cfg.policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_s) and hit2 and \
                 vclass_of(sa, False, prim2, cfg) == V_SPECULAR and _any_free(oi):
-            m = lookahead_chain(sa, mtab, hit2, prim2, p2, ng2, ns2, d2, seed, key, s, depth + 1, cfg, cf, ci,
-                                stack)
-        _shift_offsets(sa, of, oi, cfg, mat, p, ng, ns, wi, wo, weight, pdf, delta, cls_b, cls_s, (u_lobe, u1, u2),
-                       hit2, prim2, p2, ng2, ns2, d2, stats, stack, mtab, m, cf, ci)
+            m = lookahead_chain(sa, mtab, nx, rng, depth + 1, cfg, cf, ci, stack)
+        _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)
         prev_p, prev_pdf, prev_delta = p, pdf, delta

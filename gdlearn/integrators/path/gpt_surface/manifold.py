@@ -80,10 +80,12 @@ def manifold_table(scene, sa) -> np.ndarray:
 
 
 @noalloc
-def lookahead_chain(sa, mtab, hit, prim, p, ng, ns, d, seed, key, s, depth, cfg, cf, ci, stack):
-    """Trace the base's specular chain from its next vertex (hit, prim, p ... reached along d, at loop
-    depth ``depth``) with the base's own random numbers. Returns m, the chain length, with the chain
+def lookahead_chain(sa, mtab, nx, rng, depth, cfg, cf, ci, stack):
+    """Trace the base's specular chain from its next vertex ``nx`` (hit, prim, p ... reached along d, at
+    loop depth ``depth``) with the base's own random numbers (``rng``: :class:`~gdlearn.integrators.path.params.PathRng`). Returns m, the chain length, with the chain
     in cf / ci (rows 0..m-1) and x_c in row m, or 0 if the chain does not qualify (module docstring)."""
+    hit, prim, p, ng, ns, d = nx.hit, nx.prim, nx.p, nx.ng, nx.ns, nx.d
+    seed, key, s = rng.seed, rng.key, rng.s
     for j in range(MAX_CHAIN + 1):
         if not hit:
             return 0

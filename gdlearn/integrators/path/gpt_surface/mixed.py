@@ -107,11 +107,13 @@ def _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats):
 
 
 @noalloc
-def shift_segment_mixed(sa, k, of, oi, cfg, cls_b, mat_b, p, ng, ns, wi, wo, pdf, delta, us, hit2, prim2, p2,
-                        ng2, ns2, stats, stack):
+def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
     """Shift offset k's segment leaving its vertex by a mixed policy (module docstring). The base
-    leaves x_b = p (geometric normal ng, material mat_b, direction of lobe class cls_b: local wi -> wo,
-    density pdf, ``delta``, numbers us) to x_{b+1} = p2 (or escapes: hit2 False)."""
+    leaves x_b = ``bv.x`` (:class:`~gdlearn.integrators.path.params.BaseVertex`: geometric normal ng, material
+    mat_b, direction of lobe class ``bv.cls_s``: local wi -> wo, density pdf, ``delta``, numbers us) to
+    x_{b+1} = ``nx.p`` (or escapes: ``nx.hit`` False)."""
+    cls_b, mat_b, p, ng, us = bv.cls_s, bv.mat, bv.x, bv.ng, bv.us
+    hit2, prim2, p2, ng2, ns2 = nx.hit, nx.prim, nx.p, nx.ng, nx.ns
     if oi[k, I_ESCAPED] == 1:             # the offset path ended: later base techniques are unpaired
         oi[k, I_ALIVE] = FAILED
         return
@@ -123,8 +125,7 @@ def shift_segment_mixed(sa, k, of, oi, cfg, cls_b, mat_b, p, ng, ns, wi, wo, pdf
     if mixed_decide(cfg.policy, cls_b, cls_o, vclass_of(sa, not hit2, prim2, cfg)) == SHIFT_RECONNECT:
         # C(x_b, x'_b, x_{b+1}); shift_direction tests the segment (blocked or grazing: continue instead,
         # and the backward shift's criterion fails alike)
-        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_RECONNECT, k, of, mat_o, p, wi, wo, pdf, delta,
-                                                         us[0], us[1], us[2], p2, ng2, cfg, stack)
+        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_RECONNECT, k, of, mat_o, bv, nx, cfg, stack)
         if ok:
             _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats)
             _advance(of, oi, k, p_o, pdf_o, delta_o, lcls)
@@ -137,8 +138,7 @@ def shift_segment_mixed(sa, k, of, oi, cfg, cls_b, mat_b, p, ng, ns, wi, wo, pdf
             oi[k, I_ALIVE] = FAILED
             return
     else:
-        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, p, wi, wo, pdf, delta,
-                                                         us[0], us[1], us[2], p2, ng2, cfg, stack)
+        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, bv, nx, cfg, stack)
         if not ok:
             record(stats, SHIFT_HALFVECTOR, False)
             oi[k, I_ALIVE] = FAILED

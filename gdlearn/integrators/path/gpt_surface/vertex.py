@@ -200,11 +200,15 @@ def same_delta_lobe(mat, wi, refl):
 
 
 @noalloc
-def shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, u_lobe, u1, u2, x_next,
-                    ng_next, cfg, stack):
-    """Shift the segment leaving offset vertex k by ``action`` (base: local wi_b -> wo_b sampled with
-    density pdf_b). Updates beta' and lr in place and returns ``(wo_world, ok, lobe_class', pdf', delta')``.
-    For a reconnection wo_world points at x_next and visibility has been tested."""
+def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
+    """Shift the segment leaving offset vertex k by ``action`` (base vertex ``bv``
+    (:class:`~gdlearn.integrators.path.params.BaseVertex`): local wi_b -> wo_b sampled with density pdf_b
+    and numbers us; ``nx``: the base's next vertex x_{b+1}). Updates beta' and lr in place and returns
+    ``(wo_world, ok, lobe_class', pdf', delta')``. For a reconnection wo_world points at x_{b+1} and
+    visibility has been tested."""
+    x_b, wi_b, wo_b, pdf_b, delta_b = bv.x, bv.wi, bv.wo, bv.pdf, bv.delta
+    u_lobe, u1, u2 = bv.us[0], bv.us[1], bv.us[2]
+    x_next, ng_next = nx.p, nx.ng
     p_o = get3(of, k, F_POS)
     ns_o = get3(of, k, F_NS)
     s, t = coordinate_system(ns_o)
@@ -256,9 +260,10 @@ def _update(of, k, f, j, pdf_o, pdf_b):
 
 
 @noalloc
-def follow_base(sa, k, of, oi, mat, weight, wo, pdf, delta, cls_b, p, cfg):
-    """Offset k shares the base vertex p: same outgoing direction (J = 1). A JOINED offset arrives
-    from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
+def follow_base(sa, k, of, oi, bv, cfg):
+    """Offset k shares the base vertex x_b (``bv``): same outgoing direction (J = 1). A JOINED offset
+    arrives from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
+    mat, weight, wo, pdf, delta, cls_b, p = bv.mat, bv.weight, bv.wo, bv.pdf, bv.delta, bv.cls_b, bv.x
     if oi[k, I_RECONN] == JOINED:
         if delta:
             oi[k, I_ALIVE] = FAILED

@@ -195,11 +195,12 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
 
 
 @noalloc
-def base_flight(sa, o, d, tmax, medium, beta, seed, key, s, seg, stack):
+def base_flight(sa, o, d, tmax, medium, beta, rng, seg, stack):
     """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
-    numbers and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
+    numbers (``rng``: :class:`~gdlearn.integrators.path.params.PathRng`) and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
     ns)``: W the product of the flight's weights, log p its density (pass probabilities and the
     collision pdf, spectral MIS), tau the total distance, seg the segment the event belongs to."""
+    seed, key, s = rng.seed, rng.key, rng.s
     W = ONE3
     lp = 0.0
     tau = 0.0

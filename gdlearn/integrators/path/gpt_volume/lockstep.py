@@ -63,18 +63,19 @@ from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
 from gdlearn.kernels.jit import block, noalloc, rows
+from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM, VB_SURFACE, BaseVertex, NextVertex, PathRng, Pixel
 
 ZERO3 = (0.0, 0.0, 0.0)
 ONE3 = (1.0, 1.0, 1.0)
-#: kind of the base vertex the next segment leaves
-VB_CAMERA, VB_SURFACE, VB_MEDIUM = 0, 1, 2
 
 
 @noalloc
-def _flight(sa, of, oi, k, ev_b, tau, lp_b, cls_next, delta_next, cfg, stack):
+def _flight(sa, of, oi, k, nx, tau, lp_b, cfg, stack):
     """Shift the base's flight to offset k's own ray (distance copy / pass) and check that the
-    offset's event is of the base's kind (escape, scattering, surface of the same connectability
-    and delta-only-ness: symmetric rules, so the backward shift fails on the same pairs)."""
+    offset's event is of the base's kind ``nx.ev`` (escape, scattering, surface of the same connectability
+    ``nx.cls`` and delta-only-ness ``nx.delta``: symmetric rules, so the backward shift fails on the same
+    pairs)."""
+    ev_b, cls_next, delta_next = nx.ev, nx.cls, nx.delta
     d = get3(of, k, F_D)
     ev, prim, p, ng, ns, med, lf, lp = offset_flight(sa, get3(of, k, F_O), d, of[k, F_TMAX], oi[k, I_MED], tau,
                                                      ev_b == EV_SCATTER, stack)
@@ -92,11 +93,13 @@ def _flight(sa, of, oi, k, ev_b, tau, lp_b, cls_next, delta_next, cfg, stack):
 
 
 @noalloc
-def _shift_free(sa, of, oi, k, cfg, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_b, us, ev, prim2, p2, ng2, ns2,
-                med2, cls_next, delta_next, tau, lp_b, W, stats, stack):
-    """Shift the segment x_i -> x_{i+1} of a not yet reconnected offset: direction, then flight."""
-    if vb == VB_CAMERA:                   # the pixel shift already set the ray
-        ok = _flight(sa, of, oi, k, ev, tau, lp_b, cls_next, delta_next, cfg, stack)
+def _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
+    """Shift the segment x_i -> x_{i+1} of a not yet reconnected offset: direction, then flight
+    (``bv``, ``nx``: :class:`~gdlearn.integrators.path.params.BaseVertex` x_i, ``NextVertex`` x_{i+1}; the
+    decisions use ``bv.cls_s``)."""
+    cls_b, us, cls_next = bv.cls_s, bv.us, nx.cls
+    if bv.kind == VB_CAMERA:              # the pixel shift already set the ray
+        ok = _flight(sa, of, oi, k, nx, tau, lp_b, cfg, stack)
         if not ok:
             record(stats, SHIFT_FAIL, False)
         return ok
@@ -111,20 +114,19 @@ def _shift_free(sa, of, oi, k, cfg, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_b, 
     delta_o = False
     lcls = V_MEDIUM if medium_o else lobe_class(mat_o, False, cfg.threshold)
     if action == SHIFT_RECONNECT:
-        ok, pdf_o = reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, lp_b, cfg, stack)
+        ok, pdf_o = reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack)
     else:
         if medium_o:                      # phase sampling is replayed (no half-vector in a medium)
             pdf_o = replay_phase(sa, of, oi, k, us[1], us[2])
             ok = pdf_o > 0.0
         else:
-            wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, x_b, wi_b, wo_b, pdf_b,
-                                                             delta_b, us[0], us[1], us[2], p2, ng2, cfg, stack)
+            wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack)
             if ok:
                 ng_o = get3(of, k, F_NG)
                 set_ray(of, oi, k, offset_origin(p_o, ng_o, wo_w), wo_w,
                         next_medium(sa.prim_info, oi[k, I_PRIM], oi[k, I_MED], wo_w, ng_o))
         if ok:
-            ok = _flight(sa, of, oi, k, ev, tau, lp_b, cls_next, delta_next, cfg, stack)
+            ok = _flight(sa, of, oi, k, nx, tau, lp_b, cfg, stack)
     record(stats, action, ok)
     if ok:
         set3(of, k, F_PREV_P, p_o)
@@ -136,39 +138,35 @@ def _shift_free(sa, of, oi, k, cfg, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_b, 
 
 
 @noalloc
-def _shift_all(sa, of, oi, cfg, bv, ev, prim2, p2, ng2, ns2, d, med2, tau, lp_b, W, seg0, seg_b, seed, key, s, stats, stack):
-    """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``ev`` at p2). ``bv``: the
-    base vertex x_i the segment leaves, ``(vb, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, wo_bw, weight_b,
-    pdf_b, delta_b, cls_b, cls_s, us)`` (cls_b its lobe's effect class, cls_s its class for the shift
-    decisions); the base flight read the random numbers of segments seg0 .. seg_b."""
-    vb, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, cls_s, us = bv
-    cls_next = V_MEDIUM if ev == EV_SCATTER else vclass_of(sa, ev == EV_ESCAPE, prim2, cfg)
-    delta_next = ev == EV_SURFACE and bsdf_is_delta_only(sa.materials[sa.prim_info[prim2, INFO_MAT]])
+def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, stack):
+    """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``nx.ev`` at ``nx.p``).
+    ``bv``: the base vertex x_i the segment leaves, ``nx`` the vertex x_{i+1} it reached
+    (:class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``; ``bv.cls_b`` its lobe's effect
+    class, ``bv.cls_s`` its class for the shift decisions); the base flight (weight W, log density lp_b,
+    length tau) read the random numbers (``rng``) of segments seg0 .. seg_b."""
+    ev = nx.ev
     kind = K_SURFACE if ev == EV_SURFACE else (K_MEDIUM if ev == EV_SCATTER else K_ESCAPED)
     for k in range(4):
         if oi[k, I_ALIVE] != ALIVE:
             continue
         if oi[k, I_RECONN] != FREE:
-            follow(sa, of, oi, k, vb == VB_MEDIUM, mat_b, wo_b, wo_bw, weight_b, pdf_b, delta_b, cls_b, x_b,
-                   cfg)
+            follow(sa, of, oi, k, bv, cfg)
             if oi[k, I_ALIVE] == ALIVE:   # the same flight as the base: its weight
                 set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
-                set_vertex(sa, of, oi, k, kind, prim2, p2, ng2, ns2, d, med2)
+                set_vertex(sa, of, oi, k, kind, nx.prim, nx.p, nx.ng, nx.ns, nx.d, nx.med)
         elif is_mixed(cfg.policy):
-            if not shift_free_mixed(sa, of, oi, k, cfg, vb == VB_CAMERA, vb == VB_MEDIUM, x_b, ng_b, prim_b, med_b,
-                                    mat_b, wi_b, wo_b, pdf_b, delta_b, cls_s, us, ev, prim2, p2, ng2, ns2, med2,
-                                    cls_next, seg0, seg_b, seed, key, s, lp_b, stats, stack):
+            if not shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, stack):
                 oi[k, I_ALIVE] = FAILED
-        elif not _shift_free(sa, of, oi, k, cfg, vb, x_b, wi_b, wo_b, pdf_b, delta_b, cls_s, us, ev, prim2, p2,
-                             ng2, ns2, med2, cls_next, delta_next, tau, lp_b, W, stats, stack):
+        elif not _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
             oi[k, I_ALIVE] = FAILED
     push_medium_vertex(oi)
 
 
 @noalloc
-def _emission(sa, escaped, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, summ, cfg):
-    """The emitter-hit technique at the base's surface hit / escape (volpath's arithmetic, so L is
+def _emission(sa, nx, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, summ, cfg):
+    """The emitter-hit technique at the base's surface hit / escape ``nx`` (volpath's arithmetic, so L is
     pt's bit for bit) and its pairs with every offset's own hit."""
+    escaped, prim, p, ns, d = nx.ev == EV_ESCAPE, nx.prim, nx.p, nx.ns, nx.d
     cb = ZERO3
     if wanted(cfg, state):
         em = sa.env if escaped else sa.prim_info[prim, INFO_EMITTER]
@@ -197,10 +195,13 @@ def _emission(sa, escaped, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, s
 
 
 @noalloc
-def _next_event(sa, p, ng, ns, prim, medium, mat, g, medium_vertex, wi_w, beta, state, seed, key, s, seg, of, oi,
-                diff, summ, cfg, stack):
-    """volpath's next-event sample at the base vertex (``nee_volume``'s random numbers and arithmetic)
-    and its shifts to the offsets (:func:`gpt_volume_vertex.nee_pairs`); returns the base term."""
+def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, stack):
+    """volpath's next-event sample at the base vertex ``nx`` -- the vertex the last flight reached, a
+    medium vertex when ``nx.ev`` is EV_SCATTER (``nee_volume``'s random numbers and arithmetic) -- and its
+    shifts to the offsets (:func:`gpt_volume_vertex.nee_pairs`); returns the base term."""
+    p, ng, ns, prim, medium, medium_vertex = nx.p, nx.ng, nx.ns, nx.prim, nx.med, nx.ev == EV_SCATTER
+    wi_w = (-nx.d[0], -nx.d[1], -nx.d[2])
+    seed, key, s = rng.seed, rng.key, rng.s
     n_em = sa.emitters.shape[0]
     if n_em == 0:
         return ZERO3
@@ -259,28 +260,34 @@ def _roulette_all(of, oi, beta, eta, depth, cfg, u):
 
 
 @noalloc
-def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
-                      of, oi, diff, summ, stats, stack):
-    """One volpath base path through film point (fx, fy) of pixel (x, y) and its four shifts.
+def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
+    """One volpath base path through film point (fx, fy) of pixel (x, y) (``px``:
+    :class:`~gdlearn.integrators.path.params.Pixel`; random numbers ``rng``: ``PathRng``) and its four shifts.
     Returns L; ``diff[k]`` / ``summ[k]`` receive D_k / S_k of shift k (right, left, down, up)."""
+    seed, key, s = rng.seed, rng.key, rng.s
     diff[:] = 0.0
     summ[:] = 0.0
-    o, d, tmax = camera_ray(sa.camera, fx, fy)
-    start_offsets(sa, fx, fy, x, y, w, h, of, oi)
+    o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
+    start_offsets(sa, px, of, oi)
     medium = sa.camera_medium
     beta, eta, state, L, depth, seg = ONE3, 1.0, pc_init(), ZERO3, 0, 0
     prev_p, prev_pdf, prev_delta = o, 1.0, True
     # the base vertex the next segment leaves, as the shifts need it (_shift_all)
-    bv = (VB_CAMERA, o, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, ZERO3, ONE3, 1.0, False, 0, 0,
-          (0.0, 0.0, 0.0))
+    bv = BaseVertex(VB_CAMERA, o, ZERO3, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, ZERO3, ONE3, 1.0, False,
+                    0, 0, (0.0, 0.0, 0.0))
     while True:
         seg0 = seg
-        ev, seg, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, seed, key,
-                                                                           s, seg, stack)
+        ev, seg, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, rng, seg,
+                                                                           stack)
         tmax = math.inf
         if ev == EV_FAIL:
             break
-        _shift_all(sa, of, oi, cfg, bv, ev, prim, p, ng, ns, d, medium, tau, lp_b, W, seg0, seg, seed, key, s, stats, stack)
+        # the vertex x_{i+1} the flight reached (params.NextVertex): its class and delta-only-ness, as the
+        # shifts of the segment x_i -> x_{i+1} need them
+        cls_next = V_MEDIUM if ev == EV_SCATTER else vclass_of(sa, ev == EV_ESCAPE, prim, cfg)
+        delta_next = ev == EV_SURFACE and bsdf_is_delta_only(sa.materials[sa.prim_info[prim, INFO_MAT]])
+        nx = NextVertex(ev != EV_ESCAPE, ev, prim, p, ng, ns, d, medium, cls_next, delta_next)
+        _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg, rng, stats, stack)
         wi_w = (-d[0], -d[1], -d[2])
         u_lobe = rand(seed, key, s, dim(seg, D_LOBE))    # also at a medium vertex: a replayed offset may need it
         if ev == EV_SCATTER:
@@ -289,20 +296,18 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
                 break
             state = pc_push(state, V_MEDIUM)
             _, _, g = medium_params(sa.media[medium])
-            cb = _next_event(sa, p, ng, ns, -1, medium, bv[5], g, True, wi_w, beta, state, seed, key, s, seg, of,
-                             oi, diff, summ, cfg, stack)
+            cb = _next_event(sa, nx, bv.mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
             u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
             d2, pdf = hg_sample(g, wi_w, u1, u2)
             if not pdf > 0.0:
                 break
-            bv = (VB_MEDIUM, p, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, d2, ONE3, pdf, False, V_MEDIUM,
-                  V_MEDIUM, (u_lobe, u1, u2))
+            bv = BaseVertex(VB_MEDIUM, p, ZERO3, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, d2, ONE3, pdf,
+                            False, V_MEDIUM, V_MEDIUM, (u_lobe, u1, u2))
             o, d = p, d2
             prev_p, prev_pdf, prev_delta = p, pdf, False
         else:
-            cb = _emission(sa, ev == EV_ESCAPE, prim, p, ns, d, beta, prev_p, prev_pdf, prev_delta, state, of, oi,
-                           diff, summ, cfg)
+            cb = _emission(sa, nx, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, summ, cfg)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
             if ev == EV_ESCAPE or depth + 1 >= cfg.max_depth:
                 break
@@ -310,8 +315,7 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
             sf, tf = coordinate_system(ns)
             wi = to_local(wi_w, sf, tf, ns)
             if not bsdf_is_delta_only(mat):
-                cb = _next_event(sa, p, ng, ns, prim, medium, mat, 0.0, False, wi_w, beta, state, seed, key, s, seg,
-                                 of, oi, diff, summ, cfg, stack)
+                cb = _next_event(sa, nx, mat, 0.0, beta, state, rng, seg, of, oi, diff, summ, cfg, stack)
                 L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
             u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
             wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, u1, u2)
@@ -326,8 +330,8 @@ def gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg,
             cls_b = sampled_lobe_class(mat, wi, u_lobe, is_delta, cfg.threshold)
             cls_s = cls_b if cfg.broken == BROKEN_LOBE_CLASS else lobe_class(mat, is_delta, cfg.threshold)
             state = pc_push(state, cls_b)
-            bv = (VB_SURFACE, p, ng, prim, med_b, mat, wi, wo, d2, weight, pdf, is_delta, cls_b, cls_s,
-                  (u_lobe, u1, u2))
+            bv = BaseVertex(VB_SURFACE, p, ng, ns, prim, med_b, mat, wi, wo, d2, weight, pdf, is_delta, cls_b, cls_s,
+                            (u_lobe, u1, u2))
             prev_p, prev_pdf, prev_delta = p, pdf, is_delta
             depth += 1
             d = d2
@@ -367,9 +371,10 @@ def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
                 if cfg.policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
-                    c = replay_sample(sa, True, fx, fy, x, y, w, h, seed, key, s, cfg, d8, st, stack)
+                    c = replay_sample(sa, True, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, d8, st, stack)
                 else:
-                    c = gpt_volume_sample(sa, fx, fy, x, y, w, h, seed, key, s, cfg, of, oi, diff, summ, st, stack)
+                    c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff,
+                                          summ, st, stack)
                     d8[:4] = diff
                     d8[4:] = summ
                 if not finite_sample(c, d8):

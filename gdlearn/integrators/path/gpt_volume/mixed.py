@@ -39,18 +39,19 @@ from gdlearn.integrators.path.volume import next_medium
 from gdlearn.shifts.policy import SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY, mixed_action, mixed_decide, record
 from gdlearn.shifts.reconnection import reconnect
 from gdlearn.kernels.jit import leaf, noalloc
+from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM
 
 ONE3 = (1.0, 1.0, 1.0)
 
 
 @noalloc
-def replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, cfg, stack):
+def replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack):
     """volpath's flight along offset k's ray with the base's random numbers of segment seg0 on (module
     docstring). False if it ends in no event or after another number of null interfaces than the
     base's flight (which ended at segment seg_b)."""
     d = get3(of, k, F_D)
     ev, seg, med, _, W, _, _, prim, p, ng, ns = base_flight(sa, get3(of, k, F_O), d, of[k, F_TMAX], oi[k, I_MED],
-                                                            ONE3, seed, key, s, seg0, stack)
+                                                            ONE3, rng, seg0, stack)
     if ev == EV_FAIL or seg != seg_b:
         return False
     if cfg.broken != BROKEN_REPLAY_WEIGHT:
@@ -61,12 +62,12 @@ def replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, cfg, stack):
 
 
 @noalloc
-def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, x_b, ng_b, prim_b, med_b, vb_medium, cls_x, cfg,
-                              stack):
+def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, bv, cls_x, cfg, stack):
     """Would the backward shift (base: offset k, whose new vertex y2 is its current one; offset: the base
-    vertex x_b) reconnect x_b to y2? ``lobe_y``: class of the offset's direction at y_b; ``cls_x``: class
-    of x_b; x_b arrived in medium ``med_b`` (on primitive prim_b, geometric normal ng_b, unless
-    ``vb_medium``)."""
+    vertex x_b = ``bv.x``) reconnect x_b to y2? ``lobe_y``: class of the offset's direction at y_b;
+    ``cls_x``: class of x_b; x_b arrived in medium ``bv.med`` (on primitive ``bv.prim``, geometric normal
+    ``bv.ng``, unless it is a medium vertex)."""
+    x_b, ng_b, prim_b, med_b, vb_medium = bv.x, bv.ng, bv.prim, bv.med, bv.kind == VB_MEDIUM
     kind = oi[k, I_KIND]
     if kind == K_ESCAPED or not (conn(lobe_y) and conn(cls_x)):
         return False
@@ -82,19 +83,17 @@ def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, x_b, ng_b, prim_b, med
 
 
 @noalloc
-def _continue(sa, of, oi, k, action, medium_o, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, us, p2, ng2, cfg,
-              stack):
-    """The offset's own next direction (replay, or the half-vector copy) and its ray. Returns
-    ``(ok, lobe_class', pdf', delta')``."""
+def _continue(sa, of, oi, k, action, medium_o, mat_o, bv, nx, cfg, stack):
+    """The offset's own next direction (replay, or the half-vector copy of the base's at ``bv``, towards
+    ``nx``) and its ray. Returns ``(ok, lobe_class', pdf', delta')``."""
+    us = bv.us
     if medium_o:                                       # phase sampling is replayed
         pdf_o = replay_phase(sa, of, oi, k, us[1], us[2])
         return pdf_o > 0.0, V_MEDIUM, pdf_o, False
     if action == SHIFT_REPLAY:
         wo_w, ok, lcls, pdf_o, delta_o = replay_direction(sa, k, of, mat_o, us[0], us[1], us[2], cfg)
     else:
-        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, x_b, wi_b, wo_b, pdf_b,
-                                                         delta_b, us[0], us[1], us[2], p2, ng2, cfg,
-                                                         stack)
+        wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, bv, nx, cfg, stack)
     if ok:
         p_o, ng_o = get3(of, k, F_POS), get3(of, k, F_NG)
         set_ray(of, oi, k, offset_origin(p_o, ng_o, wo_w), wo_w,
@@ -103,13 +102,15 @@ def _continue(sa, of, oi, k, action, medium_o, mat_o, x_b, wi_b, wo_b, pdf_b, de
 
 
 @noalloc
-def shift_free_mixed(sa, of, oi, k, cfg, vb_camera, vb_medium, x_b, ng_b, prim_b, med_b, mat_b, wi_b, wo_b, pdf_b,
-                     delta_b, cls_s, us, ev, prim2, p2, ng2, ns2, med2, cls_next, seg0, seg_b, seed, key, s, lp_b, stats, stack):
-    """Shift a not yet reconnected offset along the base's segment x_b -> x_{b+1} by a mixed policy.
-    Returns False when the offset fails or its path ends (the caller marks it: later base techniques
-    are unpaired). ``cls_s``: class of the base's direction at x_b (``lobe_class``, V_MEDIUM)."""
-    if vb_camera:                          # the pixel shift set the ray: replay the first flight
-        ok = replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, cfg, stack)
+def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, stack):
+    """Shift a not yet reconnected offset along the base's segment x_b -> x_{b+1} by a mixed policy
+    (``bv``, ``nx``: :class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``). Returns False
+    when the offset fails or its path ends (the caller marks it: later base techniques are unpaired).
+    ``bv.cls_s``: class of the base's direction at x_b (``lobe_class``, V_MEDIUM)."""
+    vb_medium, mat_b, cls_s = bv.kind == VB_MEDIUM, bv.mat, bv.cls_s
+    cls_next = nx.cls
+    if bv.kind == VB_CAMERA:               # the pixel shift set the ray: replay the first flight
+        ok = replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack)
         if not ok:
             record(stats, SHIFT_REPLAY, False)
         return ok
@@ -122,22 +123,21 @@ def shift_free_mixed(sa, of, oi, k, cfg, vb_camera, vb_medium, x_b, ng_b, prim_b
     p_o = get3(of, k, F_POS)
     # C(x_b, x'_b, x_{b+1}) (the table, shifts.policy.mixed_decide); blocked or grazing: continue instead
     if mixed_decide(cfg.policy, cls_s, cls_o, cls_next) == SHIFT_RECONNECT:
-        ok, pdf_o = reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, lp_b, cfg, stack)
+        ok, pdf_o = reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack)
         if ok:
             record(stats, SHIFT_RECONNECT, True)
             _advance(of, oi, k, p_o, pdf_o, False, medium_o, V_MEDIUM if medium_o else vertex_class(mat_o, cfg.threshold))
             return True
     action = mixed_action(cfg.policy, cb, co)
-    ok, lcls, pdf_o, delta_o = _continue(sa, of, oi, k, action, medium_o, mat_o, x_b, wi_b, wo_b, pdf_b, delta_b, us,
-                                         p2, ng2, cfg, stack)
+    ok, lcls, pdf_o, delta_o = _continue(sa, of, oi, k, action, medium_o, mat_o, bv, nx, cfg, stack)
     if not ok:                             # replay: the neighbour's tracer stops too; a copy failed
         record(stats, action, action == SHIFT_REPLAY)
         return False
-    ok = replay_flight(sa, of, oi, k, seg0, seg_b, seed, key, s, cfg, stack)
+    ok = replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack)
     if ok and cfg.broken != BROKEN_REVERSIBILITY:
         cls_x = V_MEDIUM if vb_medium else vertex_class(mat_b, cfg.threshold)
-        ok = not inverse_reconnects_volume(sa, oi, of, k, lcls, p_o, x_b, ng_b, prim_b, med_b, vb_medium, cls_x,
-                                           cfg, stack) and mixed_action(cfg.policy, conn(lcls), conn(cls_x)) == action
+        ok = not inverse_reconnects_volume(sa, oi, of, k, lcls, p_o, bv, cls_x, cfg, stack) and \
+            mixed_action(cfg.policy, conn(lcls), conn(cls_x)) == action
     record(stats, action, ok)
     if ok:
         _advance(of, oi, k, p_o, pdf_o, delta_o, medium_o, lcls)

@@ -31,6 +31,7 @@ from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.reconnection import reconnect
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 from gdlearn.kernels.jit import leaf, noalloc
+from gdlearn.integrators.path.params import VB_MEDIUM
 
 ZERO3 = (0.0, 0.0, 0.0)
 ONE3 = (1.0, 1.0, 1.0)
@@ -73,9 +74,11 @@ def wanted(cfg, state):
 
 
 @noalloc
-def start_offsets(sa, fx, fy, x, y, w, h, of, oi):
-    """The pixel shift (Eq. 3): the neighbours' camera rays with the base's sub-pixel jitter, in the
-    camera's medium. Their first flight is shifted once the base's is known."""
+def start_offsets(sa, px, of, oi):
+    """The pixel shift (Eq. 3): the neighbours' camera rays with the base's sub-pixel jitter (``px``:
+    :class:`~gdlearn.integrators.path.params.Pixel`), in the camera's medium. Their first flight is
+    shifted once the base's is known."""
+    fx, fy, x, y, w, h = px.fx, px.fy, px.x, px.y, px.w, px.h
     for k in range(4):
         if not neighbour_inside(x, y, k, w, h):
             oi[k, I_ALIVE] = OUTSIDE
@@ -212,13 +215,16 @@ def replay_phase(sa, of, oi, k, u1, u2):
 
 
 @noalloc
-def reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, lp_b, cfg, stack):
-    """Reconnection of offset vertex x'_i (surface or medium) to the base's next vertex x_{i+1}
+def reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack):
+    """Reconnection of offset vertex x'_i (surface or medium) to the base's next vertex x_{i+1} = ``nx.p``
+    (``bv``: the base vertex x_i, :class:`~gdlearn.integrators.path.params.BaseVertex`)
     (surface or medium; STAR Sec. 3.3, Jacobian 1 in area / volume). In the (direction, distance)
     measure the Jacobian is |dw'/dw| of ``reconnection.reconnect`` (cosine 1 at a medium vertex:
     dV = t^2 dw dt on both paths); the offset segment's own transmittance, pass / collision density
     and the medium it arrives in (which must be the base's) come from ``segment_to``. Returns
     (ok, pdf' of the direction)."""
+    x_b, pdf_b = bv.x, bv.pdf
+    ev, prim2, p2, ng2, ns2, med2 = nx.ev, nx.prim, nx.p, nx.ng, nx.ns, nx.med
     p_o = get3(of, k, F_POS)
     ng_o = get3(of, k, F_NG)
     w_o, _, _, j_sa, ok = reconnect(x_b, p_o, p2, ng2)
@@ -240,10 +246,14 @@ def reconnect_offset(sa, of, oi, k, x_b, pdf_b, ev, prim2, p2, ng2, ns2, med2, l
 
 
 @noalloc
-def follow(sa, of, oi, k, vb_medium, mat_b, wo_b_local, wo_b, weight_b, pdf_b, delta_b, cls_b, x_b, cfg):
-    """Offset k shares the base vertex x_b: the same outgoing direction (J = 1). A JOINED offset
-    arrives from its own direction, so f and the density differ once more (a delta lobe cannot be
-    followed); a MERGED one is the base path itself from here on (f' / p = the base's weight)."""
+def follow(sa, of, oi, k, bv, cfg):
+    """Offset k shares the base vertex x_b (``bv``, :class:`~gdlearn.integrators.path.params.BaseVertex`):
+    the same outgoing direction (J = 1). A JOINED offset arrives from its own direction, so f and the
+    density differ once more (a delta lobe cannot be followed); a MERGED one is the base path itself
+    from here on (f' / p = the base's weight)."""
+    vb_medium = bv.kind == VB_MEDIUM
+    mat_b, wo_b_local, wo_b, weight_b, pdf_b, delta_b, cls_b, x_b = (bv.mat, bv.wo, bv.wo_w, bv.weight, bv.pdf,
+                                                                     bv.delta, bv.cls_b, bv.x)
     if oi[k, I_RECONN] == JOINED:
         wi_w = get3(of, k, F_WI)
         if vb_medium:
