@@ -38,6 +38,7 @@ from gdlearn.kernels.rng import rand
 from gdlearn.kernels.scene_query import SHADOW_EPS
 from gdlearn.integrators.path.surface import D_MED_CH, D_MED_T, dim
 from gdlearn.integrators.path.volume import MAX_SEGMENTS, next_medium
+from gdlearn.shifts.distance import lands_on_segment
 from gdlearn.kernels.jit import leaf, noalloc
 
 #: flight events
@@ -117,11 +118,11 @@ def offset_flight(sa, o, d, tmax, medium, tau, scatter, stack):
     for _ in range(MAX_SEGMENTS):
         t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
-        if scatter and travelled + t > tau:          # the copied distance lies on this sub-segment
+        lands, tl = lands_on_segment(tau, travelled, t)
+        if scatter and lands:                        # the copied distance lies on this sub-segment
             if medium < 0:
                 break
             sig, alb, _ = medium_params(sa.media[medium])
-            tl = max(tau - travelled, 0.0)
             p = (o[0] + tl * d[0], o[1] + tl * d[1], o[2] + tl * d[2])
             return EV_SCATTER, -1, p, ZERO3, ZERO3, medium, _log_scatter(lt, sig, alb, tl), lp + log_distance_pdf(sig, tl)
         if medium >= 0:
