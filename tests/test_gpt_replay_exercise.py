@@ -15,16 +15,16 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 EX = ROOT / "exercises"
 
+#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
+#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
+#: assertion depends on how long the child took.
+SUBPROCESS_TIMEOUT = 1800
+
 SOLUTION = (EX / "_solutions" / "replay.py").read_text()
 
 LITERAL_ALGORITHM_1 = '''
 import numpy as np
 from gdlearn.reconstruct import control_variates
-
-#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
-#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
-#: assertion depends on how long the child took.
-SUBPROCESS_TIMEOUT = 1800
 
 
 def accumulate(radiance, width, height, spp, seed, dims=4):
