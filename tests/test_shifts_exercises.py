@@ -18,14 +18,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 EX = ROOT / "exercises"
 
-RECONNECTION = '''
-import math
-import numpy as np
-
 #: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
 #: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
 #: assertion depends on how long the child took.
 SUBPROCESS_TIMEOUT = 1800
+
+RECONNECTION = '''
+import math
+import numpy as np
 
 
 def reconnection_jacobian(x_b, x_b_offset, y, n_y):
