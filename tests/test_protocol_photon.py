@@ -104,9 +104,6 @@ def test_a_photon_pass_estimator_runs_end_to_end_and_is_unbiased():
 
 def test_a_wrong_normalisation_is_caught_by_the_same_check():
     class Wrong(ToyPhotons):
-        def emitted(self, pts):
-            return len(pts)
-
         def _density(self, pts):
             return super()._density(pts) * (len(pts) / (len(pts) - 100))   # normalised by too few paths
 

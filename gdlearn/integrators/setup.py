@@ -21,13 +21,6 @@ from gdlearn.scene.effects import plan as effects_plan
 UNBOUNDED = 1 << 30
 
 
-def effect_names(effects) -> list[str] | None:
-    """``"direct,caustics"`` or a list -> a list of effect names (None: everything the scene shows)."""
-    if isinstance(effects, str):
-        return [e.strip() for e in effects.split(",") if e.strip()]
-    return effects
-
-
 class SceneSetup:
     """``SceneSetup(scene, effects=None, max_depth=None, threads=None, sa=None)``.
 
@@ -46,7 +39,7 @@ class SceneSetup:
             scene.integrator = copy.copy(scene.integrator)
             scene.integrator.max_depth = int(max_depth)
         self.scene = scene
-        self.plan = effects_plan(scene, effect_names(effects))
+        self.plan = effects_plan(scene, effects)   # names, groups or a comma string
         self.sa = sa if sa is not None else compile_scene(scene, self.plan)
         md = scene.integrator.max_depth
         md = UNBOUNDED if md < 0 else md
