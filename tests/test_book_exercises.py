@@ -125,3 +125,29 @@ def test_wrong_distribution_is_caught(tmp_path):
     assert any("pdf(w) = cos(theta) / pi" in line for line in failed), out
     assert any("exactly, for every seed" in line for line in failed), out
     assert not any("unit vectors" in line for line in failed), out        # those parts are right
+
+
+def test_sppm_update_without_the_flux_rescale_is_caught(tmp_path):
+    """The classic slip of the SPPM exercise: the radius shrinks but tau is kept (tau' = tau + Phi),
+    so old photons are counted as if they had fallen into the smaller disc. The checks must say so,
+    and must still accept its N and R updates."""
+    work = tmp_path / "exercises"
+    shutil.copytree(EXERCISES_DIR / "sppm-update", work / "sppm-update")
+    (work / "sppm-update" / "sppm_update.py").write_text(textwrap.dedent("""
+        import math
+
+        def progressive_update(N, r2, tau, M, phi, alpha):
+            if N + M == 0:
+                return N, r2, tau
+            ratio = (N + alpha * M) / (N + M)
+            return N + alpha * M, r2 * ratio, tau + phi
+
+        def radiance(tau, r2, n_emitted):
+            return tau / (math.pi * r2 * n_emitted)
+        """))
+    rc, out = _check("sppm-update", solution=False, exercises_dir=work)
+    assert rc == 1, out
+    failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
+    assert any("density form" in line for line in failed), out
+    assert any("known density" in line for line in failed), out
+    assert not any("radius never shrinks" in line for line in failed), out

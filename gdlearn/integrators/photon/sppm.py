@@ -190,6 +190,17 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
                 "nonfinite_samples": int(out.bad.sum())}
 
 
+def _result(est, emission, stats) -> PassResult:
+    """A pass's images from its two halves (axis 0): ``primal``, and ``emission`` -- the part of
+    primal that the gather paths saw directly or through specular chains (added exactly, no
+    photon): its noise is the camera sampling's, 2 samples a pixel a pass, and tests and figures
+    that study the photon estimate mask its pixels out."""
+    a, b = est[0], est[1]
+    ea, eb = emission[0], emission[1]
+    return PassResult(images={"primal": 0.5 * (a + b), "emission": 0.5 * (ea + eb)}, spp=2,
+                      halves={"primal": (a, b), "emission": (ea, eb)}, stats=stats)
+
+
 class SPPM(SurfacePhotonMapper):
     """Stochastic progressive photon mapping (module docstring): per-pixel N, R, tau."""
 
@@ -207,10 +218,9 @@ class SPPM(SurfacePhotonMapper):
         self.E += out.le
         self._m = out.m.sum(axis=0)
         k = pass_index + 1
-        halves = self.D / (self.n_half * k) + self.E / k
-        a, b = halves[0], halves[1]
-        return PassResult(images={"primal": 0.5 * (a + b)}, spp=2, halves={"primal": (a, b)},
-                          stats=self._stats(out, lp))
+        em = self.E / k
+        halves = self.D / (self.n_half * k) + em
+        return _result(halves, em, self._stats(out, lp))
 
     def update_radius(self, pass_index: int) -> None:
         self.N, self.r2 = reduce_radius(self.N, self.r2, self._m, self.alpha)
@@ -232,10 +242,8 @@ class PPM(SurfacePhotonMapper):
         r2 = self.r2 * ppm_radius2_factor(pass_index, self.alpha)
         out = self._gather(lp, grids, 2 * pass_index, np.sqrt(r2))
         est = out.phi / (math.pi * r2[None, :, :, None] * self.n_half) + out.le
-        a, b = est[0], est[1]
         self._r_now = float(np.sqrt(r2).mean())
-        return PassResult(images={"primal": 0.5 * (a + b)}, spp=2, halves={"primal": (a, b)},
-                          stats=self._stats(out, lp))
+        return _result(est, out.le, self._stats(out, lp))
 
     def pass_state(self) -> dict:
         return {"alpha": self.alpha, "mean_radius": self._r_now}
