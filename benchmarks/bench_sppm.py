@@ -8,6 +8,16 @@ compare the two halves of the work directly.
 
     .venv/bin/python benchmarks/bench_sppm.py [--scene scenes/cornell-box.xml] [--res 64]
         [--photons 200000] [--threads 2] [--repeats 3]
+
+``--equal-time S`` instead runs the equal-time study of the chapter "Photon density estimation" at
+benchmark size: pt and sppm get S seconds each (JIT excluded) on every ``--scenes`` scene, for
+``--seeds`` seeds, interleaved seed by seed (pt, sppm, pt, sppm, ...) so both see the same load;
+every final image is measured against a path-traced reference of ``--ref-spp`` spp (cached under
+$GDLEARN_CACHE/references, its relMSE floor printed). It prints per scene the final relMSE of each
+run, the per-seed ratio pt / sppm (> 1: sppm has the lower error), their mean and spread.
+
+    .venv/bin/python benchmarks/bench_sppm.py --equal-time 20 --res 128 --seeds 3
+        [--scenes scenes/caustics-box.xml,scenes/caustic-closeup.xml,scenes/cornell-box.xml]
 """
 from __future__ import annotations
 
@@ -31,7 +41,14 @@ def main(argv=None) -> int:
     ap.add_argument("--photons", type=int, default=200_000, help="light paths per pass")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--equal-time", type=float, default=None, metavar="S",
+                    help="run the equal-time study pt vs sppm with S seconds per run instead")
+    ap.add_argument("--scenes", default="scenes/caustics-box.xml,scenes/caustic-closeup.xml,scenes/cornell-box.xml")
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--ref-spp", type=int, default=4096)
     a = ap.parse_args(argv)
+    if a.equal_time is not None:
+        return equal_time_study(a)
     scene = load(a.scene, res=a.res)
 
     sppm = make("sppm", scene, seed=0, photons_per_pass=a.photons, threads=a.threads)
@@ -65,6 +82,41 @@ def main(argv=None) -> int:
     print(f"gather per pass      {stages['gather']:12.4f} s  ({2 * a.res * a.res} gather points)")
     print(f"bytes per vertex     {BYTES_PER_VERTEX:12d}  ({BYTES_PER_VERTEX * verts / max(photons, 1):.0f} per photon "
           f"incl. the non-photon vertices; + ~72 in the hash grid: position, cell, id, buckets)")
+    return 0
+
+
+def equal_time_study(a) -> int:
+    """pt vs sppm at equal time (module docstring)."""
+    import numpy as np
+
+    from gdlearn.experiments import SceneFile, equal_time
+    from gdlearn.experiments.references import render_reference
+    from gdlearn.experiments.study import Method
+
+    methods = ["pt", Method("sppm", "sppm", None, (("photons_per_pass", a.photons), ("threads", a.threads)))]
+    print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, sppm {a.photons} "
+          f"light paths a pass; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    for path in a.scenes.split(","):
+        sf = SceneFile(path, (("res", a.res),))
+        t0 = time.perf_counter()
+        ref = render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64)
+        print(f"\n{sf.name}: reference pt {a.ref_spp} spp ({time.perf_counter() - t0:.0f} s, cached after), "
+              f"relMSE floor {ref.floor:.2e}")
+        err = {"pt": [], "sppm": []}
+        spp = {"pt": [], "sppm": []}
+        for seed in range(a.seeds):
+            st = equal_time(methods, [sf], seconds=a.equal_time, seeds=[seed], references=ref,
+                            executor="serial", count=4, spp_per_pass=4)
+            for m in err:
+                r = st.select(True, method=m, seed=seed)[0]
+                err[m].append(r["relmse"])
+                spp[m].append(r["spp"])
+        ratio = np.array(err["pt"]) / np.array(err["sppm"])
+        for m in err:
+            print(f"  {m:5s} relMSE {np.mean(err[m]):.3e}  (seeds: {', '.join(f'{e:.3e}' for e in err[m])}; "
+                  f"{np.mean(spp[m]):.0f} spp)")
+        print(f"  pt / sppm: mean {ratio.mean():.2f}, min {ratio.min():.2f}, max {ratio.max():.2f}  "
+              f"(seeds: {', '.join(f'{r:.2f}' for r in ratio)}); load average {os.getloadavg()[0]:.2f}")
     return 0
 
 
