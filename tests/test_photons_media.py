@@ -5,10 +5,18 @@ a Fresnel formula written out below -- and compared within k standard errors of 
 estimate (k = 4 unless said otherwise: a false alarm ~6e-5 per check). Seeds are fixed, so a run is
 reproducible; the tolerances are what make a correct tracer pass for *any* seed.
 
-Planted bugs each check was shown to catch (one at a time, by hand, in gdlearn/photons/trace.py):
-the free-flight weight dropped (surfaces reached with weight 1 instead of T / P(pass)), the albedo
-dropped from the collision weight, the 1/dist^2 or the free-flight factor dropped from pdf_fwd,
-``e = 1.0`` in ``_adjoint_weight`` (radiance eta^2 scaling kept on refraction).
+Planted bugs, each shown to fail this file (one at a time, in gdlearn/photons/trace.py; the
+tests that failed in brackets):
+
+* pass weight T / P(pass) replaced by 1                [slab transmittance, chromatic]
+* albedo dropped from the collision weight              [first collision, ball density]
+* 1 / dist^2 dropped from a medium vertex's pdf_fwd     [first collision]
+* P(pass) dropped from a surface vertex's pdf_fwd       [slab transmittance, both]
+* ``e = 1.0`` in ``_adjoint_weight`` (eta^2 kept)       [glass floor]
+* a null vertex records the medium it leads into        [slab transmittance, records]
+* every path starts in the outer medium (no locating)   [first collision, ball density, records]
+* free flights sampled with 1.05 sigma_t                [first collision (KS), slab transmittance]
+* light path keyed by its row in the batch, not j       [thread / batch independence, both scenes]
 """
 import math
 from pathlib import Path

@@ -261,6 +261,69 @@ def _roulette(w, w_edge, k, rr_depth, u):
     return True, (w[0] / q, w[1] / q, w[2] / q)
 
 
+@inlined
+def _medium_vertex(sa, prm, h, rec, j, k, o, d, t, beta, pdf_dir, fac, medium, nsc, w_edge):
+    """Record the collision at distance t along (o, d) as scattering vertex nsc (row k, its parent
+    row k - 1; sigma_s T / pdf is in beta already), then leave it by phase sampling and roulette.
+    Returns (go_on, o, d, beta, pdf_dir) for the next edge."""
+    p = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+    kp = k - 1
+    _put(rec, k, p, ZERO3, ZERO3, d)
+    _put_meta(rec, k, beta, pdf_dir * fac / (t * t), K_MEDIUM, medium, -1, F_PHOTON if prm.want_volume else 0)
+    _put_link(rec, k, kp, j, nsc, medium)
+    if nsc >= prm.max_vertices:
+        return False, p, d, beta, 0.0
+    b = DIMS_START + DIMS_PER_BOUNCE * (nsc - 1)
+    wo, pdf = _scatter_medium(sa, medium, h, b, d)
+    if not pdf > 0.0:
+        return False, p, d, beta, 0.0
+    rec.lobe[k] = L.V_MEDIUM
+    # phase functions are symmetric: the reverse direction has the same pdf
+    rec.pdf_rev[kp] = pdf * _reverse_factor(sa, medium, rec.kind[kp], t) * _parent_cos(rec, kp, d) / (t * t)
+    if nsc == 1 and not (prm.want_other or prm.want_volume):      # a medium first vertex is no caustic
+        return False, p, d, beta, 0.0
+    alive, w = _roulette((1.0, 1.0, 1.0), w_edge, nsc, prm.rr_depth, rand_at(h, b + D_RR))
+    if not alive:
+        return False, p, d, beta, 0.0
+    beta = _mul(beta, w)
+    return max3(beta) > 0.0, p, wo, beta, pdf
+
+
+@inlined
+def _surface_vertex(sa, prm, h, rec, j, k, prim, p, ng, ns, d, t, beta, pdf_fwd, medium, nsc, caustic, w_edge):
+    """Record the hit (p, ng, ns) of primitive ``prim`` as scattering vertex nsc (row k), then leave
+    it by BSDF sampling (adjoint weight) and roulette. Returns (go_on, o, d, beta, pdf_dir, medium,
+    caustic) for the next edge; ``medium`` is the arriving edge's and becomes the leaving one's."""
+    mid = sa.prim_info[prim, INFO_MAT]
+    mat = sa.materials[mid]
+    kp = k - 1
+    store = _wanted_surface(prm, mat, nsc, caustic)
+    _put(rec, k, p, ng, ns, d)
+    _put_meta(rec, k, beta, pdf_fwd, K_SURFACE, mid, prim, F_PHOTON if store else 0)
+    _put_link(rec, k, kp, j, nsc, medium)
+    if nsc >= prm.max_vertices:
+        return False, p, d, beta, 0.0, medium, caustic
+    b = DIMS_START + DIMS_PER_BOUNCE * (nsc - 1)
+    ok, wo_w, w, pdf, delta, lobe, rev = _scatter_surface(mat, prm, h, b, d, ng, ns)
+    if not ok:
+        return False, p, d, beta, 0.0, medium, caustic
+    rec.lobe[k] = lobe
+    if delta:
+        rec.flags[k] |= F_DELTA_OUT
+    else:       # reverse pdf of the parent: sampled from here towards it, to area at the parent
+        rec.pdf_rev[kp] = rev * _reverse_factor(sa, medium, rec.kind[kp], t) * _parent_cos(rec, kp, d) / (t * t)
+    if nsc == 1:     # the first scattering vertex decides caustic (L S ...) or not
+        caustic = lobe == L.V_SPECULAR
+        if not prm.want_volume and ((caustic and not prm.want_caustic) or (not caustic and not prm.want_other)):
+            return False, p, d, beta, 0.0, medium, caustic
+    alive, w = _roulette(w, w_edge, nsc, prm.rr_depth, rand_at(h, b + D_RR))
+    if not alive:
+        return False, p, d, beta, 0.0, medium, caustic
+    beta = _mul(beta, w)
+    return (max3(beta) > 0.0, offset_origin(p, ng, wo_w), wo_w, beta, pdf,
+            next_medium(sa.prim_info, prim, medium, wo_w, ng), caustic)
+
+
 @noalloc
 def trace_one(sa, cdf, prm, seed, pass_index, j, rec, base, stack):
     """Trace light path j of pass ``pass_index`` into rows base, base+1, ... (at most
@@ -269,116 +332,54 @@ def trace_one(sa, cdf, prm, seed, pass_index, j, rec, base, stack):
     ok, o, d, beta, pdf_dir, medium = _emit(sa, cdf, prm, h, j, rec, base, stack)
     if not ok:
         return 0
-    nv = 1                  # rows written
-    nsc = 0                 # scattering vertices among them
-    nnull = 0               # null vertices among them
+    nv, nsc, nnull = 1, 0, 0    # rows written; scattering and null vertices among them
     caustic = False
-    after_null = False      # is the current segment's origin a null vertex?
+    after_null = False          # is the current segment's origin a null vertex?
     w_edge = (1.0, 1.0, 1.0)    # free-flight weights since the last scattering vertex
-    while nsc < prm.max_vertices:
+    go_on = True
+    while go_on and nsc < prm.max_vertices:
         t, prim, uu, vv = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf,
                                              stack)
-        kp = base + nv - 1
-        k = kp + 1
-        seg_med = medium
+        k = base + nv
         scattered = False
         fac = 1.0
         if medium >= 0:
-            if after_null:
-                bd = NULL_DIMS0 + 2 * (nnull - 1)
-                u_ch, u_t = rand_at(h, bd), rand_at(h, bd + 1)
-            else:
-                bd = DIMS_START + DIMS_PER_BOUNCE * nsc
-                u_ch, u_t = rand_at(h, bd + D_MED_CH), rand_at(h, bd + D_MED_T)
-            t, scattered, wf, fac = _free_flight(sa.media[medium], t if prim >= 0 else math.inf, u_ch, u_t)
+            bd = NULL_DIMS0 + 2 * (nnull - 1) if after_null else DIMS_START + DIMS_PER_BOUNCE * nsc + D_MED_CH
+            t, scattered, wf, fac = _free_flight(sa.media[medium], t if prim >= 0 else math.inf, rand_at(h, bd),
+                                                 rand_at(h, bd + 1))
             beta = _mul(beta, wf)
             w_edge = _mul(w_edge, wf)
             if not max3(beta) > 0.0:
                 break
         if not scattered and prim < 0:
             break
-        if scattered:                       # a medium vertex: sigma_s T / pdf is in beta already
-            p = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        nv += 1
+        if scattered:
             nsc += 1
-            nv += 1
-            _put(rec, k, p, ZERO3, ZERO3, d)
-            _put_meta(rec, k, beta, pdf_dir * fac / (t * t), K_MEDIUM, medium, -1, F_PHOTON if prm.want_volume else 0)
-            _put_link(rec, k, kp, j, nsc, seg_med)
-            if nsc >= prm.max_vertices:
-                break
-            b = DIMS_START + DIMS_PER_BOUNCE * (nsc - 1)
-            wo, pdf = _scatter_medium(sa, medium, h, b, d)
-            if not pdf > 0.0:
-                break
-            rec.lobe[k] = L.V_MEDIUM
-            # phase functions are symmetric: the reverse direction has the same pdf
-            rec.pdf_rev[kp] = pdf * _reverse_factor(sa, seg_med, rec.kind[kp], t) * _parent_cos(rec, kp, d) / (t * t)
-            if nsc == 1 and not (prm.want_other or prm.want_volume):
-                break
-            alive, w = _roulette((1.0, 1.0, 1.0), w_edge, nsc, prm.rr_depth, rand_at(h, b + D_RR))
-            if not alive:
-                break
-            beta = _mul(beta, w)
-            if not max3(beta) > 0.0:
-                break
-            d = wo
-            o = p
-            pdf_dir = pdf
-            w_edge = (1.0, 1.0, 1.0)
-            after_null = False
+            go_on, o, d, beta, pdf_dir = _medium_vertex(sa, prm, h, rec, j, k, o, d, t, beta, pdf_dir, fac, medium,
+                                                        nsc, w_edge)
+            w_edge, after_null = (1.0, 1.0, 1.0), False
             continue
         p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, uu, vv)
-        mid = sa.prim_info[prim, INFO_MAT]
-        mat = sa.materials[mid]
         # area-measure pdf of this vertex: the parent's solid-angle pdf times |cos| / dist^2 (times
         # the pass probability in a medium)
         pdf_fwd = pdf_dir * fac * abs(dot(d, ng)) / (t * t)
-        if bsdf_is_null(mat):               # an index-matched interface: recorded, not a bounce
+        if bsdf_is_null(sa.materials[sa.prim_info[prim, INFO_MAT]]):    # an interface, not a bounce
             if nnull >= prm.max_null:
+                nv -= 1
                 break
             nnull += 1
-            nv += 1
             _put(rec, k, p, ng, ns, d)
-            _put_meta(rec, k, beta, pdf_fwd, K_SURFACE, mid, prim, F_DELTA_OUT)
-            _put_link(rec, k, kp, j, nsc + 1, seg_med)
+            _put_meta(rec, k, beta, pdf_fwd, K_SURFACE, sa.prim_info[prim, INFO_MAT], prim, F_DELTA_OUT)
+            _put_link(rec, k, k - 1, j, nsc + 1, medium)
             medium = next_medium(sa.prim_info, prim, medium, d, ng)
             o = offset_origin(p, ng, d)
-            pdf_dir = 1.0
-            after_null = True
+            pdf_dir, after_null = 1.0, True
             continue
         nsc += 1
-        nv += 1
-        store = _wanted_surface(prm, mat, nsc, caustic)
-        _put(rec, k, p, ng, ns, d)
-        _put_meta(rec, k, beta, pdf_fwd, K_SURFACE, mid, prim, F_PHOTON if store else 0)
-        _put_link(rec, k, kp, j, nsc, seg_med)
-        if nsc >= prm.max_vertices:
-            break
-        b = DIMS_START + DIMS_PER_BOUNCE * (nsc - 1)
-        ok, wo_w, w, pdf, delta, lobe, rev = _scatter_surface(mat, prm, h, b, d, ng, ns)
-        if not ok:
-            break
-        rec.lobe[k] = lobe
-        if delta:
-            rec.flags[k] |= F_DELTA_OUT
-        else:       # reverse pdf of the parent: sampled from here towards it, to area at the parent
-            rec.pdf_rev[kp] = rev * _reverse_factor(sa, seg_med, rec.kind[kp], t) * _parent_cos(rec, kp, d) / (t * t)
-        if nsc == 1:     # the first scattering vertex decides caustic (L S ...) or not
-            caustic = lobe == L.V_SPECULAR
-            if not prm.want_volume and ((caustic and not prm.want_caustic) or (not caustic and not prm.want_other)):
-                break
-        alive, w = _roulette(w, w_edge, nsc, prm.rr_depth, rand_at(h, b + D_RR))
-        if not alive:
-            break
-        beta = _mul(beta, w)
-        if not max3(beta) > 0.0:
-            break
-        d = wo_w
-        o = offset_origin(p, ng, d)
-        medium = next_medium(sa.prim_info, prim, medium, d, ng)
-        pdf_dir = pdf
-        w_edge = (1.0, 1.0, 1.0)
-        after_null = False
+        go_on, o, d, beta, pdf_dir, medium, caustic = _surface_vertex(sa, prm, h, rec, j, k, prim, p, ng, ns, d, t,
+                                                                      beta, pdf_fwd, medium, nsc, caustic, w_edge)
+        w_edge, after_null = (1.0, 1.0, 1.0), False
     return nv
 
 
