@@ -16,8 +16,10 @@ Eq. 11, whose photon weights alpha_i are the flux of Eq. 4): the path knows the 
 at the start the one the emitter sits in (:func:`gdlearn.kernels.media.boundary.locate_medium`:
 no emitter declares a medium, so it is read from the geometry by Mitsuba's interior/exterior rule;
 a point in the unbounded region takes ``TraceParams.outer_medium``, which :class:`LightTracer`
-derives from the scene), then the volpath rules of :mod:`gdlearn.integrators.path.volume`
-(``next_medium`` after every surface, the same function). On every segment inside a medium a
+derives from the scene; one extra ray walk per path in a scene with media, none without), then
+the volpath rules of :mod:`gdlearn.integrators.path.volume`
+(:func:`gdlearn.kernels.media.boundary.next_medium` after every surface, the function volpath
+calls). On every segment inside a medium a
 free-flight distance is sampled with the path tracer's spectral-MIS routine
 (:func:`gdlearn.kernels.media.medium.sample_distance`, Jarosz et al. 2008, Eq. 1-2 and Table 1):
 
@@ -36,8 +38,8 @@ convex boundary per edge, else 0); a path that would need more ends there.
 The pdfs stored (records module): forward, the parent's solid-angle pdf times the edge's free-flight
 factor -- the collision density (1/3) sum_c sigma_c e^(-sigma_c t) at a medium vertex, the pass
 probability at a surface -- times |cos| at a surface (1 at a medium vertex) over dist^2 (PHOTONS.md
-Sec. 0.1 and E2: volume measure in media, area measure on surfaces); backwards the same with the
-child's sampling pdf and the parent's cosine.
+Sec. 0.1 and E2: volume measure in media, area measure on surfaces; Veach 1997, Sec. 8.2.2 for
+the change of measure); backwards the same with the child's sampling pdf and the parent's cosine.
 
 Russian roulette from light depth ``rr_depth`` survives with ``min(max(w), 0.95)`` per bounce, w the
 vertex's scattering weight times the free-flight weights of the edge that arrived (the albedo at a
