@@ -17,6 +17,8 @@ tests that failed in brackets):
 * every path starts in the outer medium (no locating)   [first collision, ball density, records]
 * free flights sampled with 1.05 sigma_t                [first collision (KS), slab transmittance]
 * light path keyed by its row in the batch, not j       [thread / batch independence, both scenes]
+* roulette survivors not divided by q                   [albedo series with roulette]
+* collision weight taken as the albedo (grey shortcut)  [chromatic collisions]
 """
 import math
 from pathlib import Path
@@ -63,7 +65,7 @@ SIG, ALB, I_PT = 1.5, 0.7, 2.0
 
 @pytest.fixture(scope="module")
 def point_medium():
-    sa = _sa(SCENES / "medium-point.xml", sigma_t=SIG, albedo=ALB, I=I_PT, g=0.0)
+    sa = _sa(SCENES / "medium-point.xml", sigma_t=f"{SIG}, {SIG}, {SIG}", albedo=ALB, I=I_PT, g=0.0)
     return sa, _trace(sa, 60000, max_vertices=2)
 
 
@@ -115,6 +117,50 @@ def test_collision_density_in_a_ball_matches_the_uncollided_fluence(point_medium
     expected = _ball_integral(lambda r: ALB * SIG * phi * math.exp(-SIG * r) / (4 * math.pi * r * r), 0.8, rho) / vol
     assert inside.size > 300
     assert _within(x.mean(), x.std() / math.sqrt(n), expected)
+
+
+def test_chromatic_collision_weights_use_the_spectral_mis_density():
+    """RGB sigma_t (1, 1.5, 2.5): one collision serves all channels, its weight sigma_s,c T_c / pdf
+    with the spectral-MIS pdf (1/3) sum_c sigma_c T_c. Per channel the first collisions carry Phi a
+    in total and, in the ball, sigma_s,c phi_0,c (as the grey test above, channel by channel)."""
+    n, sig = 60000, (1.0, 1.5, 2.5)
+    sa = _sa(SCENES / "medium-point.xml", sigma_t=", ".join(map(str, sig)), albedo=ALB, I=I_PT, g=0.0)
+    lp = _trace(sa, n, max_vertices=1)
+    first = np.flatnonzero(lp.depth == 1)
+    phi = 4.0 * math.pi * I_PT
+    x = _per_path(lp, first, n, lp.beta[first])
+    c, rho = np.array([0.48, 0.0, 0.64]), 0.3
+    inside = first[np.linalg.norm(lp.pos[first] - c, axis=1) < rho]
+    vol = 4.0 / 3.0 * math.pi * rho ** 3
+    y = _per_path(lp, inside, n, lp.beta[inside]) / vol
+    for ch in range(3):
+        assert _within(x[:, ch].mean(), x[:, ch].std() / math.sqrt(n), phi * ALB), ch
+        s = sig[ch]
+        expected = _ball_integral(lambda r: ALB * s * phi * math.exp(-s * r) / (4 * math.pi * r * r), 0.8, rho) / vol
+        assert _within(y[:, ch].mean(), y[:, ch].std() / math.sqrt(n), expected), (ch, y[:, ch].mean(), expected)
+    # the volume pdf of a first collision is the MIS density (1/3) sum_c sigma_c exp(-sigma_c r) / (4 pi r^2)
+    r = np.linalg.norm(lp.pos[first], axis=1)
+    mis = np.mean([s * np.exp(-s * r) for s in sig], axis=0)
+    np.testing.assert_allclose(lp.pdf_fwd[first], mis / (4 * math.pi * r * r), rtol=1e-9)
+
+
+@pytest.mark.parametrize("max_vertices, rr_depth", [(64, 1), (3, 50)])
+def test_scattered_power_sums_to_the_albedo_series(max_vertices, rr_depth):
+    """Energy balance in an unbounded grey medium (sigma_t R = 60: no path reaches the boundary): the
+    k-th collision carries Phi a^k on average, whatever the phase function (here HG g = 0.6), so the
+    weights of all medium vertices of a path sum to Phi sum_{k <= K} a^k on average -- with Russian
+    roulette from the first vertex on (which must divide by its survival probability) and with the
+    series cut at max_vertices K = 3 and no roulette."""
+    n = 40000
+    sa = _sa(SCENES / "medium-point.xml", sigma_t=f"{SIG}, {SIG}, {SIG}", albedo=ALB, I=I_PT, g=0.6)
+    lp = _trace(sa, n, max_vertices=max_vertices, rr_depth=rr_depth)
+    med = np.flatnonzero(lp.kind == K_MEDIUM)
+    assert (lp.kind[lp.depth > 0] == K_MEDIUM).all()
+    x = _per_path(lp, med, n, lp.beta[med].mean(axis=1))
+    phi = 4.0 * math.pi * I_PT
+    expected = phi * sum(ALB ** k for k in range(1, max_vertices + 1))
+    # without roulette every path's sum is that exact number; with it the spread is the roulette's
+    assert _within(x.mean(), x.std() / math.sqrt(n), expected, slack=1e-9 * expected)
 
 
 # -- 2. transmittance through a slab behind null interfaces -------------------------------------
