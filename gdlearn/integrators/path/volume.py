@@ -35,9 +35,10 @@ from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_on
                    nee_class_share, nee_classes, sampled_lobe_class)
 from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, INFO_MED_EXT, INFO_MED_INT, INFO_MED_TRANS, offset_origin, surface
+from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from gdlearn.kernels.layout import MAT_TYPE, NULL, V_MEDIUM
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
+from gdlearn.kernels.media.boundary import next_medium   # the one rule, shared with light tracing
 from gdlearn.kernels.media.medium import medium_params, sample_distance, transmittance
 from gdlearn.kernels.pathclass import pc_init, pc_push, pc_reachable
 from gdlearn.kernels.media.phase import hg_eval, hg_sample
@@ -67,16 +68,6 @@ def roulette(beta, eta, depth, rr_depth, u):
     if u >= q:
         return False, beta
     return True, (beta[0] / q, beta[1] / q, beta[2] / q)
-
-
-@block
-def next_medium(prim_info, prim, medium, d, ng):
-    """The medium a ray of direction d is in after crossing/leaving the surface of ``prim``."""
-    if prim_info[prim, INFO_MED_TRANS] == 0:
-        return medium
-    if dot(d, ng) < 0.0:
-        return prim_info[prim, INFO_MED_INT]
-    return prim_info[prim, INFO_MED_EXT]
 
 
 @noalloc

@@ -114,9 +114,11 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
         self.n_half = self.photons_per_pass // 2
         md = s.max_depth if s.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
         mask = s.mask
+        # surface estimators: medium vertices are never photons (and _refuse keeps media out)
         self.trace_params = TraceParams(max(0, md - 1), s.rr_depth, s.threshold,
                                         bool(mask >> CAUSTICS & 1),
-                                        any(mask >> c & 1 for c in _PHOTON_CLASSES if c != CAUSTICS))
+                                        any(mask >> c & 1 for c in _PHOTON_CLASSES if c != CAUSTICS),
+                                        want_volume=False)
         self.gather_params = GatherParams(int(min(md, UNBOUNDED)), s.threshold, mask,
                                           not all(mask >> c & 1 for c in _PHOTON_CLASSES))
         self.tracer = LightTracer(s.sa, self.trace_params, threads=threads)
