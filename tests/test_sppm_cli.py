@@ -25,6 +25,12 @@ def test_sppm_options_reach_the_integrator(tmp_path):
     # two passes (2 camera samples each): R^2 shrank from 0.05^2 by (N + a M) / (N + M) <= 1
     rad = np.load(tmp_path / "b" / "radius.npy")
     assert rad.max() <= 0.05 + 1e-15 and rad.min() < 0.05
+    # the photon-count map N and the exactly-added emission are buffers too; N = alpha x photons found
+    # in the first pass + alpha x the second's, so it is >= 0 and somewhere > 0 (4000 photons, 8 x 8)
+    n = np.load(tmp_path / "b" / "photon_count.npy")
+    assert n.shape == (8, 8) and n.min() >= 0 and n.max() > 0
+    em = np.load(tmp_path / "b" / "emission.npy")
+    assert em.shape == (8, 8, 3) and np.all(em <= img + 1e-12)     # emission is a part of the primal
 
 
 def test_photon_options_are_refused_for_other_integrators(tmp_path):
