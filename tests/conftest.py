@@ -112,3 +112,28 @@ def execute_chapter(path: Path, quick: bool = True):
         os.environ.clear()
         os.environ.update(env_before)
     return nb, time.perf_counter() - t0
+
+
+#: Bound on one exercise check in a child process (it may JIT-compile numba kernels cold on a busy
+#: 2-core machine). It only bounds a hang: no assertion depends on how long the child took.
+EXERCISE_CHECK_TIMEOUT = 1800
+
+
+def check_exercise_source(tmp_path: Path, name: str, source: str) -> tuple[int, str]:
+    """Run ``gdlearn check NAME`` in a child process on a copy of exercise ``name`` whose stub is
+    replaced by ``source``; return (exit status, printed report). Tests use it to show that a
+    planted wrong answer fails the checks and the right one passes."""
+    import shutil
+    import subprocess
+    import sys
+    work = tmp_path / "exercises"
+    shutil.copytree(ROOT / "exercises" / name, work / name)
+    (work / "_solutions").mkdir()
+    (work / name / f"{name.replace('-', '_')}.py").write_text(source)
+    code = (f"import pathlib, sys; import gdlearn.teaching.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(work)!r}); "
+            f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; r = e.check({name!r}); print(r.text()); "
+            "sys.exit(0 if r.ok else 1)")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=EXERCISE_CHECK_TIMEOUT)
+    return res.returncode, res.stdout + res.stderr

@@ -7,21 +7,15 @@ direction (a local-frame replay), and a copy that never fails. Each wrong stub m
 `gdlearn check` (run in a child process on a copy of the exercise, with readable feedback), while
 the reference solution passes.
 """
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from conftest import check_exercise_source
+
 ROOT = Path(__file__).resolve().parent.parent
 EX = ROOT / "exercises"
 
-#: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
-#: 2-core machine). It only bounds a hang: subprocess.run kills the child when it expires, and no
-#: assertion depends on how long the child took.
-SUBPROCESS_TIMEOUT = 1800
 
 RECONNECTION = '''
 import math
@@ -86,23 +80,9 @@ CASES = ([("reconnection-jacobian", "solution", (EX / "_solutions" / "reconnecti
          + [("halfvector-mirror", k, _mirror(**v), False) for k, v in MIRROR_WRONG.items()])
 
 
-def _check(folder: Path, name: str) -> tuple[int, str]:
-    code = (f"import pathlib, sys; import gdlearn.teaching.exercises as e; e.EXERCISES_DIR = pathlib.Path({str(folder)!r}); "
-            f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; r = e.check({name!r}); print(r.text()); "
-            "sys.exit(0 if r.ok else 1)")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
-                         timeout=SUBPROCESS_TIMEOUT)
-    return res.returncode, res.stdout + res.stderr
-
-
 @pytest.mark.parametrize("name, label, source, right", CASES, ids=[f"{c[0]}: {c[1]}" for c in CASES])
 def test_the_checks_separate_right_from_wrong(tmp_path, name, label, source, right):
-    work = tmp_path / "exercises"
-    shutil.copytree(EX / name, work / name)
-    (work / "_solutions").mkdir()
-    (work / name / f"{name.replace('-', '_')}.py").write_text(source)
-    rc, out = _check(work, name)
+    rc, out = check_exercise_source(tmp_path, name, source)
     if right:
         assert rc == 0, out
     else:
