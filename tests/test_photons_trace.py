@@ -62,7 +62,7 @@ def test_record_links_kinds_and_photons(cornell):
 def test_emitted_power_is_the_emitters_power(cornell):
     """E[vertex-0 weight] = the total emitted power pi A Le; 4 standard errors (the weight of one
     area light is constant, so the check is exact up to rounding)."""
-    lp = _trace(cornell, None, n=2000)
+    lp = LightTracer(cornell, PARAMS._replace(keep_escaped=True)).trace(5, 2, 0, 2000)
     w = lp.beta[lp.depth == 0].mean(axis=1)
     assert w.size == 2000
     total = emitter_power(cornell).sum()
@@ -71,10 +71,32 @@ def test_emitted_power_is_the_emitters_power(cornell):
 
 def test_point_light_power_and_direction_sampling():
     sa = compile_scene(gdlearn.scene.load(str(ROOT / "tests/scenes_photons/plane-point.xml")))
-    lp = LightTracer(sa, TraceParams(1, 5, 0.05, True, True)).trace(0, 0, 0, 20000)
+    lp = LightTracer(sa, TraceParams(1, 5, 0.05, True, True, keep_escaped=True)).trace(0, 0, 0, 20000)
     v0 = lp.depth == 0
     np.testing.assert_allclose(lp.beta[v0], 4 * math.pi * 3.0, rtol=1e-12)
     d = lp.d_in[v0]
     # isotropic: the fraction going down (z < 0) is 1/2 within 4 standard errors
     frac = (d[:, 2] < 0).mean()
     assert abs(frac - 0.5) < 4 * 0.5 / math.sqrt(d.shape[0])
+
+
+def test_open_scene_drops_escaped_paths_and_recycled_memory_changes_nothing():
+    """In an open scene most light paths leave from their emitter: they are not recorded (no edge,
+    no photon), every recorded path keeps >= 2 vertices. Records traced into memory handed back
+    with ``recycle`` equal a fresh tracer's, and records not handed back are never overwritten."""
+    sa = compile_scene(gdlearn.scene.load(str(ROOT / "scenes/caustic-closeup.xml"), res=8))
+    n = 4000
+    fresh = LightTracer(sa, PARAMS).trace(5, 1, 0, n)
+    paths, counts = np.unique(fresh.path, return_counts=True)
+    assert 0 < paths.size < n and (counts >= 2).all()
+    assert (fresh.kind[fresh.depth == 0] == K_EMITTER).sum() == paths.size
+    lt = LightTracer(sa, PARAMS)
+    kept = lt.trace(5, 0, 0, n)
+    snapshot = [f.copy() for f in kept]
+    other = lt.trace(5, 3, 0, n)                 # not recycled: `kept` must stay as it was
+    assert all(np.array_equal(a, b) for a, b in zip(snapshot, kept))
+    lt.recycle(other)
+    again = lt.trace(5, 1, 0, n)                 # written into other's memory
+    assert again.pos.base is other.pos.base
+    for name, x, y in zip(fresh._fields, fresh, again):
+        assert np.array_equal(x, y), name

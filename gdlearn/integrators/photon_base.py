@@ -59,6 +59,9 @@ class PhotonPassIntegrator(ProgressiveIntegrator):
     def update_radius(self, pass_index: int) -> None:
         """Shrink the radius after pass ``pass_index`` (default: a fixed radius)."""
 
+    def release(self, photons) -> None:
+        """The pass is done with ``photons`` (default: nothing; a tracer may reuse their memory)."""
+
     def pass_state(self) -> dict:
         """Values reported in ``Frame.state`` after each pass (not summed; last value wins)."""
         return {}
@@ -80,5 +83,6 @@ class PhotonPassIntegrator(ProgressiveIntegrator):
         t4 = time.perf_counter()
         res.timings.update(photons=t1 - t0, build=t2 - t1, gather=t3 - t2, update=t4 - t3)
         res.photons = self.emitted(photons)
+        self.release(photons)
         res.state = {**self.pass_state(), **res.state}
         return res

@@ -5,7 +5,9 @@ Hua et al. 2017, Sec. 4.2; G-VPM, Gruson et al. 2018, Sec. 4.3) shift a photon b
 reconnecting its light subpath, so they need the parent vertex, the sampled lobe and the
 area-measure pdfs of every vertex (PHOTONS.md Sec. 1.2). Every vertex of every light path of a pass
 is one row of :class:`LightPaths`; the vertices of one path are contiguous, vertex 0 (on the
-emitter) first, and ``parent`` links each vertex to the previous one.
+emitter) first, and ``parent`` links each vertex to the previous one. A path that leaves the
+scene from its emitter (no edge, no photon) is not recorded at all; it still counts in the
+normalisation by the number of light paths emitted (``TraceParams.keep_escaped`` records them).
 
 =============  ===========  =================================================================
 field          dtype/shape  meaning
@@ -104,8 +106,11 @@ class LightPaths(NamedTuple):
         return int(sum(a.nbytes for a in self))
 
 
-def allocate(n: int) -> LightPaths:
-    """Uninitialised records for ``n`` vertices (``kind`` = -1 marks unused slots)."""
+def allocate(n: int, empty: bool = False) -> LightPaths:
+    """Records for ``n`` vertices: ``kind`` = -1 marks unused slots, or, with ``empty``, left
+    uninitialised for a writer that fills every field of every row (the compaction)."""
+    if empty:
+        return LightPaths(*(np.empty((n, 3) if w == 3 else n, dtype=t) for t, w in FIELD_TYPES))
     f3 = lambda: np.zeros((n, 3))   # noqa: E731
     return LightPaths(f3(), f3(), f3(), f3(), f3(), np.zeros(n), np.zeros(n), np.full(n, -1, np.int8),
                       np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.full(n, -1, np.int8),
@@ -128,6 +133,7 @@ def concatenate(parts: list[LightPaths]) -> LightPaths:
     return LightPaths(*fields)
 
 
-BYTES_PER_VERTEX = sum(np.dtype(t).itemsize * w for t, w in (
-    ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 1), ("f8", 1), ("i1", 1), ("i4", 1),
-    ("i4", 1), ("i1", 1), ("i1", 1), ("i4", 1), ("i8", 1), ("i4", 1), ("i2", 1)))
+#: (dtype, width) of every field, in LightPaths order
+FIELD_TYPES = (("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 1), ("f8", 1), ("i1", 1),
+               ("i4", 1), ("i4", 1), ("i1", 1), ("i1", 1), ("i4", 1), ("i8", 1), ("i4", 1), ("i2", 1))
+BYTES_PER_VERTEX = sum(np.dtype(t).itemsize * w for t, w in FIELD_TYPES)

@@ -171,6 +171,9 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
     def emitted(self, photons) -> int:
         return 2 * self.n_half
 
+    def release(self, light_paths) -> None:
+        self.tracer.recycle(light_paths)
+
     def compile(self) -> float:
         import time
         t0 = time.perf_counter()
