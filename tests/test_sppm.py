@@ -100,6 +100,8 @@ def test_bad_parameters_are_refused():
         make("sppm", sc, alpha=0.0)
     with pytest.raises(ValueError, match="radius"):
         make("sppm", sc, radius=-1.0)
+    with pytest.raises(ValueError, match="photons, nee"):
+        make("ppm", sc, direct="light")
 
 
 def test_sppm_converges_to_pt_through_glass_and_mirror():

@@ -36,3 +36,20 @@ def test_sppm_options_reach_the_integrator(tmp_path):
 def test_photon_options_are_refused_for_other_integrators(tmp_path):
     r = _cli(SCENE, "--photons", "10", "--set", "res=8", "--out", str(tmp_path / "a.npy"))
     assert r.returncode == 2 and "--photons" in r.stderr
+
+
+def test_direct_option_reaches_the_integrator(tmp_path):
+    """--direct nee changes which estimator gives the direct light: with the same seed and photons,
+    the images differ (the photon-only image is what --direct photons gives bit for bit)."""
+    imgs = {}
+    for direct in ("photons", "nee"):
+        out = tmp_path / f"{direct}.npy"
+        r = _cli(SCENE, "--integrator", "sppm", "--photons", "4000", "--direct", direct, "--spp", "2",
+                 "--set", "res=8", "--out", str(out), "--no-progress")
+        assert r.returncode == 0, r.stderr
+        imgs[direct] = np.load(out)
+    base = tmp_path / "default.npy"
+    assert _cli(SCENE, "--integrator", "sppm", "--photons", "4000", "--spp", "2", "--set", "res=8", "--out",
+                str(base), "--no-progress").returncode == 0
+    assert np.array_equal(np.load(base), imgs["photons"])
+    assert np.isfinite(imgs["nee"]).all() and not np.array_equal(imgs["nee"], imgs["photons"])

@@ -19,7 +19,7 @@ import time
 SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
                  "halfvector+replay+reconnection")
 
-#: integrators that take --photons, --alpha and --radius
+#: integrators that take --photons, --alpha, --radius and --direct
 PHOTON_INTEGRATORS = ("sppm", "ppm")
 
 
@@ -51,6 +51,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--alpha", type=float, default=None, help="sppm/ppm: radius reduction alpha (default 0.7)")
     p.add_argument("--radius", type=float, default=None, metavar="R",
                    help="sppm/ppm: initial radius in scene units (default: the pixel footprint)")
+    p.add_argument("--direct", choices=("photons", "nee"), default=None,
+                   help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -90,11 +92,12 @@ def run(args) -> int:
             print(f"gdlearn render: --shift applies to --integrator gpt, not {args.integrator}", file=sys.stderr)
             return 2
         opts["shift"] = args.shift
-    photon_opts = {"photons_per_pass": args.photons, "alpha": args.alpha, "radius": args.radius}
+    photon_opts = {"photons_per_pass": args.photons, "alpha": args.alpha, "radius": args.radius,
+                   "direct": args.direct}
     photon_opts = {k: v for k, v in photon_opts.items() if v is not None}
     if photon_opts:
         if args.integrator not in PHOTON_INTEGRATORS:
-            print(f"gdlearn render: --photons/--alpha/--radius apply to --integrator "
+            print(f"gdlearn render: --photons/--alpha/--radius/--direct apply to --integrator "
                   f"{'/'.join(PHOTON_INTEGRATORS)}, not {args.integrator}", file=sys.stderr)
             return 2
         opts.update(photon_opts)

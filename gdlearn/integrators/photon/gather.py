@@ -19,8 +19,12 @@ when the effects plan asks for a subset, if the full path's class (:mod:`gdlearn
 built from the camera vertices, the gather point and the photon's light vertices found through
 ``parent``) is wanted.
 
+With ``nee`` (``direct="nee"`` in sppm/ppm) the direct light at the gather point is estimated by
+emitter sampling (:func:`direct`) and photons at the light path's first vertex are left out.
+
 Random numbers: pixel key y W + x, sample 2 i + h for half h of pass i; dims 0-1 film position,
-then ``2 + 3 b + {0 lobe, 1-2 direction}`` at camera vertex b.
+then ``2 + 3 b + {0 lobe, 1-2 direction}`` at camera vertex b, and ``D_NEE + {0 emitter, 1-2
+point}`` for the emitter sample at the gather point.
 """
 from __future__ import annotations
 
@@ -37,7 +41,8 @@ from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from gdlearn.kernels.lights import eval_emitter
+from gdlearn.kernels.lights import eval_emitter, sample_emitter
+from gdlearn.kernels.scene_query import occluded
 from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
@@ -53,6 +58,7 @@ class GatherParams(NamedTuple):
     threshold: float      # roughness threshold of the vertex classification
     mask: int             # effect classes to keep
     filter_classes: bool  # does the mask exclude some photon-path class (walk the light vertices)?
+    nee: bool = False     # direct light at the gather point by emitter sampling, not by photons
 
 
 class GatherOut(NamedTuple):
@@ -61,6 +67,11 @@ class GatherOut(NamedTuple):
     le: np.ndarray        # (2, H, W, 3): emission seen through the specular chain
     foot: np.ndarray      # (2, H, W): pixel footprint at the gather point (0: no gather point)
     bad: np.ndarray       # (H,): non-finite terms dropped
+    ld: np.ndarray        # (2, H, W, 3): camera weight x direct light by emitter sampling (nee)
+
+
+#: first dimension of the gather point's emitter sample (beyond any camera vertex's block)
+D_NEE = 1 << 20
 
 
 @inlined
@@ -68,15 +79,44 @@ def _wanted(mask, state):
     return (mask >> pc_class(state)) & 1 == 1
 
 
+@inlined
+def _plus(le, beta, e):
+    return (le[0] + beta[0] * e[0], le[1] + beta[1] * e[1], le[2] + beta[2] * e[2])
+
+
+#: what :func:`_leave` decided at a camera vertex
+GATHER, CONTINUE, STOP = 0, 1, 2
+
+
 @block
-def gather_path(sa, prm, h, o, d):
+def _leave(mat, prm, h, b, wi, state, beta):
+    """At a camera vertex with local incident direction ``wi``: is it the gather point (GATHER),
+    does the specular chain go on (CONTINUE, with the sampled local direction), or does the path
+    end (STOP)? Returns (decision, wo, beta, state). A smooth plastic's diffuse base becomes the
+    gather point weighted by 1 / P(base); its delta coating continues the chain."""
+    vc = vertex_class(mat, prm.threshold)
+    plastic = int(mat[L.MAT_TYPE]) == L.PLASTIC
+    if vc != L.V_SPECULAR and not plastic:
+        return GATHER, wi, beta, pc_push(state, vc)
+    u_lobe = rand_at(h, b)
+    wo, w, pdf, delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, b + 1), rand_at(h, b + 2))
+    if not pdf > 0.0:
+        return STOP, wo, beta, state
+    if plastic and not delta:
+        pb = 1.0 - _spec_prob(fresnel_dielectric(abs(wi[2]), mat[L.MAT_ETA])[0], mat)
+        return GATHER, wi, (beta[0] / pb, beta[1] / pb, beta[2] / pb), pc_push(state, L.V_DIFFUSE)
+    state = pc_push(state, sampled_lobe_class(mat, wi, u_lobe, delta, prm.threshold))
+    return CONTINUE, wo, (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]), state
+
+
+@block
+def gather_path(sa, prm, h, o, d, stack):
     """Trace to the gather point. Returns (ok, p, ng, frame n/s/t, wi, mat row, weight, state, m,
     travelled distance, emission): ``m`` camera vertices before the gather point."""
     le = (0.0, 0.0, 0.0)
     beta = (1.0, 1.0, 1.0)
     state = pc_init()
     zero = (0.0, 0.0, 0.0)
-    stack = np.empty(STACK_SIZE, dtype=np.int32)
     travelled = 0.0
     tmax = math.inf
     m = 0
@@ -84,43 +124,46 @@ def gather_path(sa, prm, h, o, d):
         t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         if prim < 0:
             if sa.env >= 0 and _wanted(prm.mask, state):
-                e = eval_emitter(sa.emitters, sa.env, d, d)
-                le = (le[0] + beta[0] * e[0], le[1] + beta[1] * e[1], le[2] + beta[2] * e[2])
+                le = _plus(le, beta, eval_emitter(sa.emitters, sa.env, d, d))
             break
         travelled += t
         p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
         em = sa.prim_info[prim, INFO_EMITTER]
         if em >= 0 and _wanted(prm.mask, state):
-            e = eval_emitter(sa.emitters, em, ns, d)
-            le = (le[0] + beta[0] * e[0], le[1] + beta[1] * e[1], le[2] + beta[2] * e[2])
+            le = _plus(le, beta, eval_emitter(sa.emitters, em, ns, d))
         if m + 2 > prm.max_depth:          # no room for a photon's light segment after this vertex
             break
         mid = sa.prim_info[prim, INFO_MAT]
-        mat = sa.materials[mid]
         s, tt = coordinate_system(ns)
         wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
-        vc = vertex_class(mat, prm.threshold)
-        b = 2 + 3 * m
-        plastic = int(mat[L.MAT_TYPE]) == L.PLASTIC
-        if vc != L.V_SPECULAR and not plastic:
-            return True, p, ng, (ns, s, tt), wi, mid, beta, pc_push(state, vc), m, travelled, le
-        u_lobe = rand_at(h, b)
-        wo, w, pdf, delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, b + 1), rand_at(h, b + 2))
-        if plastic and not delta:          # the diffuse base: a gather point, weighted by 1 / P(base)
-            if not pdf > 0.0:
-                break
-            pb = 1.0 - _spec_prob(fresnel_dielectric(abs(wi[2]), mat[L.MAT_ETA])[0], mat)
-            beta = (beta[0] / pb, beta[1] / pb, beta[2] / pb)
-            return True, p, ng, (ns, s, tt), wi, mid, beta, pc_push(state, L.V_DIFFUSE), m, travelled, le
-        if not pdf > 0.0:
+        what, wo, beta, state = _leave(sa.materials[mid], prm, h, 2 + 3 * m, wi, state, beta)
+        if what == GATHER:
+            return True, p, ng, (ns, s, tt), wi, mid, beta, state, m, travelled, le
+        if what == STOP:
             break
-        state = pc_push(state, sampled_lobe_class(mat, wi, u_lobe, delta, prm.threshold))
-        beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
         d = to_world(wo, s, tt, ns)
         o = offset_origin(p, ng, d)
         tmax = math.inf
         m += 1
     return False, zero, zero, (zero, zero, zero), zero, -1, beta, state, m, travelled, le
+
+
+@block
+def direct(sa, p, ng, frame, wi, mat, h, stack):
+    """Direct light at the gather point by emitter sampling alone, unweighted: the gather path
+    stops here, so no BSDF sample could find the emitter and MIS has no second strategy (the
+    light path's first vertex, which a photon map would use instead, is left out of the density:
+    every path is counted once). pbrt-v3's SPPM does the same (Pharr et al. 2016, Sec. 16.2.2)."""
+    ns, s, tt = frame
+    em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
+        sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
+        rand_at(h, D_NEE), rand_at(h, D_NEE + 1), rand_at(h, D_NEE + 2))
+    if em < 0:
+        return (0.0, 0.0, 0.0)
+    f = bsdf_eval(mat, wi, to_local(dl, s, tt, ns))
+    if (f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0) or occluded(sa, p, ng, q, stack):
+        return (0.0, 0.0, 0.0)
+    return (f[0] * w_em[0], f[1] * w_em[1], f[2] * w_em[2])
 
 
 @block
@@ -191,7 +234,7 @@ def _borrow_grid(g):
 
 @block
 def _borrow_out(o):
-    return GatherOut(borrow(o.phi), borrow(o.m), borrow(o.le), borrow(o.foot), borrow(o.bad))
+    return GatherOut(borrow(o.phi), borrow(o.m), borrow(o.le), borrow(o.foot), borrow(o.bad), borrow(o.ld))
 
 
 @rows
@@ -207,16 +250,18 @@ def _gather_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
     w = radius.shape[1]
     cam = sa.camera
     nbad = 0
+    stack = np.empty(STACK_SIZE, dtype=np.int32)      # one per row, not one per gather path
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
             fx = x + rand_at(h, 0)
             fy = y + rand_at(h, 1)
             o, d, tmax = camera_ray(cam, fx, fy)
-            ok, p, ng, frame, wi, mid, beta, state, m, dist, le = gather_path(sa, prm, h, o, d)
+            ok, p, ng, frame, wi, mid, beta, state, m, dist, le = gather_path(sa, prm, h, o, d, stack)
             for c in range(3):
                 out.le[hh, y, x, c] = le[c]
                 out.phi[hh, y, x, c] = 0.0
+                out.ld[hh, y, x, c] = 0.0
             out.m[hh, y, x] = 0.0
             out.foot[hh, y, x] = 0.0
             if not ok:
@@ -226,6 +271,14 @@ def _gather_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
             dd1 = math.sqrt((d1[0] - d[0]) ** 2 + (d1[1] - d[1]) ** 2 + (d1[2] - d[2]) ** 2)
             dd2 = math.sqrt((d2[0] - d[0]) ** 2 + (d2[1] - d[1]) ** 2 + (d2[2] - d[2]) ** 2)
             out.foot[hh, y, x] = dist * max(dd1, dd2)      # PHOTONS.md Sec. 1.6, unfolded distance
+            if prm.nee and _wanted(prm.mask, state):
+                e = direct(sa, p, ng, frame, wi, sa.materials[mid], h, stack)
+                v = (beta[0] * e[0], beta[1] * e[1], beta[2] * e[2])
+                if np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2]):
+                    for c in range(3):
+                        out.ld[hh, y, x, c] = v[c]
+                else:
+                    nbad += 1
             r = radius[y, x]
             if not r > 0.0:
                 continue

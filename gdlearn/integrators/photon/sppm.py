@@ -53,6 +53,8 @@ from gdlearn.integrators.photon.gather import GatherOut, GatherParams, gather_ro
 FOOTPRINT_SAMPLE = 1 << 40
 #: light-path length bound when max_depth is unbounded (Russian roulette ends paths long before)
 MAX_LIGHT_VERTICES = 64
+#: how sppm / ppm estimate the direct light (SurfacePhotonMapper)
+DIRECT = ("photons", "nee")
 _PHOTON_CLASSES = (DIRECT_LIGHTING, DIFFUSE_INTERREFLECTION, GLOSSY, SPECULAR, CAUSTICS)
 
 
@@ -95,19 +97,28 @@ def _refuse(setup: SceneSetup) -> None:
 
 class SurfacePhotonMapper(PhotonPassIntegrator):
     """Shared by ``sppm`` and ``ppm``: ``make(name, scene, seed=0, photons_per_pass=100000,
-    alpha=0.7, radius=None, radius_scale=1.0, effects=None, max_depth=None, threads=None)``.
+    alpha=0.7, radius=None, radius_scale=1.0, direct="photons", effects=None, max_depth=None,
+    threads=None)``.
 
     ``photons_per_pass`` light paths are emitted per pass, half for each half-buffer; a pass always
-    takes 2 camera samples per pixel (one gather point per half), whatever ``spp_per_pass`` says."""
+    takes 2 camera samples per pixel (one gather point per half), whatever ``spp_per_pass`` says.
+    ``direct``: "photons" (Hachisuka & Jensen 2009: every light path's photons, direct light
+    included) or "nee" (direct light at the gather point by emitter sampling, the photons of the
+    light paths' first vertices left out; pbrt-v3's SPPM, Pharr et al. 2016, Sec. 16.2.2): the same
+    image in the limit, no kernel bias in the direct light, and photons spent on indirect light
+    and caustics only."""
 
     def __init__(self, scene, *, seed: int = 0, photons_per_pass: int = 100_000, alpha: float = 0.7,
-                 radius=None, radius_scale: float = 1.0, effects=None, max_depth=None, threads=None,
-                 sa=None, spp_per_pass: int = 2):
+                 radius=None, radius_scale: float = 1.0, direct: str = "photons", effects=None, max_depth=None,
+                 threads=None, sa=None, spp_per_pass: int = 2):
         super().__init__(scene, seed=seed, spp_per_pass=2, photons_per_pass=max(2, int(photons_per_pass)))
         if not 0.0 < float(alpha) <= 1.0:
             raise ValueError(f"alpha={alpha!r} must be in (0, 1]; 0.7 is the usual choice")
         if radius is not None and not float(radius) > 0.0:
             raise ValueError(f"radius={radius!r} must be > 0 (scene units), or None for the pixel footprint")
+        if direct not in DIRECT:
+            raise ValueError(f"direct={direct!r}: choose one of {', '.join(DIRECT)}")
+        self.direct = direct
         self.setup = s = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
         _refuse(s)
         self.alpha, self.radius0, self.radius_scale = float(alpha), radius, float(radius_scale)
@@ -120,7 +131,7 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
                                         any(mask >> c & 1 for c in _PHOTON_CLASSES if c != CAUSTICS),
                                         want_volume=False)
         self.gather_params = GatherParams(int(min(md, UNBOUNDED)), s.threshold, mask,
-                                          not all(mask >> c & 1 for c in _PHOTON_CLASSES))
+                                          not all(mask >> c & 1 for c in _PHOTON_CLASSES), direct == "nee")
         self.tracer = LightTracer(s.sa, self.trace_params, threads=threads)
         self.r2 = None                       # per-pixel squared radius of the next pass
         self.width, self.height = s.width, s.height
@@ -130,7 +141,7 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
     def _gather(self, light_paths, grids, sample0, radius):
         h, w = self.height, self.width
         out = GatherOut(np.zeros((2, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, h, w, 3)), np.zeros((2, h, w)),
-                        np.zeros(h, np.int64))
+                        np.zeros(h, np.int64), np.zeros((2, h, w, 3)))
         with self.setup.parallel(h):
             gather_rows(self.setup.sa, light_paths, grids, self.gather_params, self.seed, sample0, radius, out)
         return out
@@ -159,6 +170,8 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
 
     def build(self, light_paths):
         rows = light_paths.photons
+        if self.direct == "nee":          # the gather point's emitter sample has the direct light
+            rows = rows[light_paths.depth[rows] >= 2]
         half = light_paths.path[rows] >= self.n_half
         cell = float(np.sqrt(np.percentile(self.r2, 90)))
         grids = []
@@ -219,12 +232,14 @@ class SPPM(SurfacePhotonMapper):
             self.N = np.zeros((h, w))
             self.D = np.zeros((2, h, w, 3))
             self.E = np.zeros((2, h, w, 3))
+            self.Ld = np.zeros((2, h, w, 3))
         accumulate_density(self.D, out.phi, np.broadcast_to(self.r2, (2, h, w)))
         self.E += out.le
+        self.Ld += out.ld
         self._m = out.m.sum(axis=0)
         k = pass_index + 1
         em = self.E / k
-        halves = self.D / (self.n_half * k) + em
+        halves = self.D / (self.n_half * k) + em + self.Ld / k
         return _result(halves, em, self._stats(out, lp))
 
     def update_radius(self, pass_index: int) -> None:
@@ -246,7 +261,7 @@ class PPM(SurfacePhotonMapper):
         lp, grids = accel
         r2 = self.r2 * ppm_radius2_factor(pass_index, self.alpha)
         out = self._gather(lp, grids, 2 * pass_index, np.sqrt(r2))
-        est = out.phi / (math.pi * r2[None, :, :, None] * self.n_half) + out.le
+        est = out.phi / (math.pi * r2[None, :, :, None] * self.n_half) + out.le + out.ld
         self._r_now = float(np.sqrt(r2).mean())
         return _result(est, out.le, self._stats(out, lp))
 
