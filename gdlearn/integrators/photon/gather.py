@@ -153,7 +153,7 @@ def direct(sa, p, ng, frame, wi, mat, h, stack):
     """Direct light at the gather point by emitter sampling alone, unweighted: the gather path
     stops here, so no BSDF sample could find the emitter and MIS has no second strategy (the
     light path's first vertex, which a photon map would use instead, is left out of the density:
-    every path is counted once). pbrt-v3's SPPM does the same (Pharr et al. 2016, Sec. 16.2.2)."""
+    every path is counted once). pbrt-v3's ``SPPMIntegrator`` does the same at its visible points."""
     ns, s, tt = frame
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,

@@ -104,7 +104,7 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
     takes 2 camera samples per pixel (one gather point per half), whatever ``spp_per_pass`` says.
     ``direct``: "photons" (Hachisuka & Jensen 2009: every light path's photons, direct light
     included) or "nee" (direct light at the gather point by emitter sampling, the photons of the
-    light paths' first vertices left out; pbrt-v3's SPPM, Pharr et al. 2016, Sec. 16.2.2): the same
+    light paths' first vertices left out; pbrt-v3's ``SPPMIntegrator`` camera pass): the same
     image in the limit, no kernel bias in the direct light, and photons spent on indirect light
     and caustics only."""
 
