@@ -3,7 +3,7 @@
 non-loopback host made unresolvable, and we check that MathJax typeset the formulas and that the
 stored ipywidgets state rendered as widgets. Screenshots are written for a person to look at.
 
-    .venv/bin/python scripts/check_offline.py                       # default pages, served on 127.0.0.1
+    .venv/bin/python scripts/check_offline.py                       # every page of _toc.yml, on 127.0.0.1
     .venv/bin/python scripts/check_offline.py --file                # load through file:// instead
     .venv/bin/python scripts/check_offline.py --out /tmp/shots book/preface.html
 
@@ -32,7 +32,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 HTML = ROOT / "_build" / "html"
-DEFAULT_PAGES = ("book/preface.html", "book/rendering-as-integration.html")
+TOC = ROOT / "_toc.yml"
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 #: Every host but the loopback resolves to nothing: a page that needs a CDN visibly fails.
 NO_NETWORK = "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"
@@ -61,6 +61,26 @@ class PageResult:
         if self.offsite_scripts:
             out.append("scripts load from off-site: " + ", ".join(self.offsite_scripts))
         return out
+
+
+def toc_pages(toc: Path = TOC) -> list[str]:
+    """Every page _toc.yml lists (root first, book order) as its built HTML path, e.g.
+    ``book/preface.html``: the offline check covers the whole book, not a hand-kept subset."""
+    import yaml
+
+    data = yaml.safe_load(toc.read_text())
+    names = [data["root"]]
+
+    def walk(entries):                 # jb-book: chapters -> sections, or parts -> chapters
+        for entry in entries or []:
+            if "file" in entry:
+                names.append(entry["file"])
+            walk(entry.get("sections"))
+
+    walk(data.get("chapters"))
+    for part in data.get("parts", []):
+        walk(part.get("chapters"))
+    return [str(Path(n).with_suffix(".html")) for n in names]
 
 
 def find_browser() -> str | None:
@@ -111,9 +131,11 @@ def serve(folder: Path):
     return server, f"http://127.0.0.1:{server.server_address[1]}"
 
 
-def check(pages=DEFAULT_PAGES, use_file: bool = False, out: Path | None = None,
+def check(pages=None, use_file: bool = False, out: Path | None = None,
           html: Path = HTML) -> list[PageResult]:
-    """Inspect ``pages`` of the built book in ``html`` (default _build/html); see the module doc."""
+    """Inspect ``pages`` (default: every page of _toc.yml) of the built book in ``html`` (default
+    _build/html); see the module doc."""
+    pages = toc_pages() if pages is None else list(pages)
     browser = find_browser()
     if browser is None:
         raise FileNotFoundError("no chromium found; install it with `apt-get install -y chromium`")
@@ -131,13 +153,13 @@ def check(pages=DEFAULT_PAGES, use_file: bool = False, out: Path | None = None,
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("pages", nargs="*", default=list(DEFAULT_PAGES), help="pages relative to _build/html")
+    ap.add_argument("pages", nargs="*", help="pages relative to _build/html (default: every page of _toc.yml)")
     ap.add_argument("--file", action="store_true", help="open pages via file:// instead of a loopback server")
     ap.add_argument("--html", type=Path, default=HTML, help="the built book (default _build/html)")
     ap.add_argument("--out", type=Path, default=ROOT / "_build" / "offline-check", help="screenshot folder")
     args = ap.parse_args(argv)
     try:
-        results = check(args.pages, args.file, args.out, args.html)
+        results = check(args.pages or None, args.file, args.out, args.html)
     except FileNotFoundError as err:
         print(f"check_offline: {err}", file=sys.stderr)
         return 3

@@ -15,7 +15,27 @@ from pathlib import Path
 import pytest
 import yaml
 
+from conftest import toc_files
+
 ROOT = Path(__file__).resolve().parent.parent
+#: Objects a chapter imports, which the API page (book/api.md) must document, by their anchors.
+API_NAMES = ("gdlearn.integrators.render", "gdlearn.integrators.make", "gdlearn.scene.load.load",
+             "gdlearn.reconstruct.poisson_l2", "gdlearn.reconstruct.control_variates",
+             "gdlearn.experiments.study.equal_time", "gdlearn.shifts.mis.mis_weight_np",
+             "gdlearn.kernels.media.medium.sample_distance_1", "gdlearn.scene.effects.plan")
+
+
+def toc_pages() -> list[str]:
+    """Every page of _toc.yml as its built HTML path (book/preface.md -> book/preface.html)."""
+    return [str(p.relative_to(ROOT).with_suffix(".html")) for p in toc_files()]
+
+
+def _check_offline_module():
+    spec = importlib.util.spec_from_file_location("check_offline", ROOT / "scripts" / "check_offline.py")
+    co = importlib.util.module_from_spec(spec)
+    sys.modules["check_offline"] = co          # dataclasses look their module up there
+    spec.loader.exec_module(co)
+    return co
 
 
 @pytest.fixture(scope="module")
@@ -46,20 +66,58 @@ def test_book_builds_without_warnings(built_book):
     assert (html / "_static" / "ipywidgets" / "embed-amd.js").is_file()
 
 
+def api_problems(html: Path, names=API_NAMES) -> list[str]:
+    """What the built API page lacks: the page itself, or an anchor (autodoc's ``id``) per name."""
+    page = html / "book" / "api.html"
+    if not page.is_file():
+        return [f"{page} was not built (is book/api in _toc.yml?)"]
+    text = page.read_text(encoding="utf-8")
+    return [f"the API page does not document {n}" for n in names if f'id="{n}"' not in text]
+
+
 @pytest.mark.notebook
-@pytest.mark.timeout(600)
+@pytest.mark.timeout(60)
+def test_built_book_has_the_api_reference(built_book):
+    res, html = built_book
+    if not (html / "index.html").is_file():
+        pytest.skip("the book did not build (see test_book_builds_without_warnings)")
+    assert api_problems(html) == []
+    # a docstring's own text made it through autodoc, not only the signature
+    assert "screened Poisson" in (html / "book" / "api.html").read_text(encoding="utf-8")
+
+
+def test_api_check_can_fail(tmp_path):
+    """The API check on a planted page: a name missing from it is reported, a missing page too."""
+    (tmp_path / "book").mkdir()
+    assert api_problems(tmp_path) and "was not built" in api_problems(tmp_path)[0]
+    (tmp_path / "book" / "api.html").write_text('<dt id="gdlearn.integrators.render">render()</dt>')
+    assert api_problems(tmp_path, ("gdlearn.integrators.render",)) == []
+    assert api_problems(tmp_path, ("gdlearn.integrators.render", "gdlearn.integrators.make")) == [
+        "the API page does not document gdlearn.integrators.make"]
+
+
+def test_offline_check_covers_every_page_of_the_toc():
+    """The offline check's default pages are _toc.yml's, so a new chapter is checked without an edit."""
+    pages = toc_pages()
+    assert _check_offline_module().toc_pages() == pages
+    assert "book/preface.html" == pages[0] and "book/api.html" in pages and len(pages) == len(set(pages))
+
+
+@pytest.mark.notebook
+@pytest.mark.timeout(1500)
 def test_built_book_reads_offline(built_book, tmp_path):
-    spec = importlib.util.spec_from_file_location("check_offline", ROOT / "scripts" / "check_offline.py")
-    co = importlib.util.module_from_spec(spec)
-    sys.modules["check_offline"] = co          # dataclasses look their module up there
-    spec.loader.exec_module(co)
+    co = _check_offline_module()
     if co.find_browser() is None:
         pytest.skip("chromium is not installed (apt-get install -y chromium)")
     res, html = built_book
     if not (html / "book" / "rendering-as-integration.html").is_file():
         pytest.skip("the book did not build (see test_book_builds_without_warnings)")
-    results = co.check(co.DEFAULT_PAGES, use_file=False, out=tmp_path, html=html)
-    for r in results:
-        assert not r.problems, f"{r.page}: {r.problems}"
+    pages = toc_pages()                      # every page of the book, from _toc.yml
+    missing = [p for p in pages if not (html / p).is_file()]
+    assert not missing, f"pages of _toc.yml not in the built book: {missing}"
+    results = co.check(pages, use_file=False, out=tmp_path, html=html)
+    assert [r.page for r in results] == pages
+    problems = [f"{r.page}: {r.problems}" for r in results if r.problems]
+    assert not problems, "pages that do not read offline:\n" + "\n".join(problems)
     chapter = next(r for r in results if r.page.endswith("rendering-as-integration.html"))
     assert chapter.stores_widgets and chapter.widgets > 0 and chapter.math > 10

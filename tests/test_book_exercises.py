@@ -2,10 +2,11 @@
 stub with readable feedback, and catch a plausible wrong answer.
 
 The exercise tests run in a child process (as `gdlearn check` would), so their imports and pytest's
-state stay apart from this test session.
+state stay apart from this test session: conftest's ``check_exercise_source`` runs the checks on a
+copy of the exercise with the stub replaced by a given source (the same helper as the media,
+effects and shifts exercise tests).
 """
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import check_exercise_source
 from gdlearn.teaching.exercises import EXERCISES_DIR, SOLUTIONS_DIR, TARGET_ENV, list_exercises, module_name
 
 #: Bound on one child process (it may JIT-compile numba kernels cold, which took > 120 s on a busy
@@ -30,19 +32,6 @@ def _env(**extra):
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     env.update(extra)
     return env
-
-
-def _check(name: str, solution: bool, exercises_dir: Path | None = None):
-    """Run gdlearn.teaching.exercises.check in a child; return (exit status, printed report)."""
-    patch = ""
-    if exercises_dir is not None:
-        patch = (f"e.EXERCISES_DIR = pathlib.Path({str(exercises_dir)!r}); "
-                 f"e.SOLUTIONS_DIR = e.EXERCISES_DIR / '_solutions'; ")
-    code = ("import pathlib, sys; import gdlearn.teaching.exercises as e; " + patch +
-            f"r = e.check({name!r}, solution={solution}); print(r.text()); sys.exit(0 if r.ok else 1)")
-    res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(), capture_output=True,
-                         text=True, timeout=SUBPROCESS_TIMEOUT)
-    return res.returncode, res.stdout + res.stderr
 
 
 def test_there_is_an_exercise():
@@ -77,10 +66,7 @@ def _pristine_stub(name: str) -> str:
 
 @pytest.mark.parametrize("name", EXERCISES)
 def test_stub_fails_with_readable_feedback(name, tmp_path):
-    work = tmp_path / "exercises"
-    shutil.copytree(EXERCISES_DIR / name, work / name)
-    (work / name / f"{module_name(name)}.py").write_text(_pristine_stub(name))
-    rc, out = _check(name, solution=False, exercises_dir=work)
+    rc, out = check_exercise_source(tmp_path, name, _pristine_stub(name))
     assert rc == 1, f"the untouched stub of {name} should fail its checks:\n{out}"
     assert "FAIL" in out and "checks passed" in out, out
     assert "Traceback" not in out, f"feedback must not be a traceback wall:\n{out}"
@@ -90,19 +76,14 @@ def test_a_solved_stub_passes_in_place(tmp_path):
     """A student solves the exercise in its own folder: `gdlearn check` then passes, and the stub
     test above (which reads the pristine stub) is unaffected."""
     name = "mis-weights"
-    work = tmp_path / "exercises"
-    shutil.copytree(EXERCISES_DIR / name, work / name)
-    shutil.copy(SOLUTIONS_DIR / f"{module_name(name)}.py", work / name / f"{module_name(name)}.py")
-    rc, out = _check(name, solution=False, exercises_dir=work)
+    rc, out = check_exercise_source(tmp_path, name, (SOLUTIONS_DIR / f"{module_name(name)}.py").read_text())
     assert rc == 0 and "Well done" in out, out
 
 
 def test_wrong_distribution_is_caught(tmp_path):
     """A uniform-hemisphere warp with a self-consistent pdf: unit vectors, pdf integrates to 1, the
     estimator is even unbiased -- but it is not cosine-weighted, and the checks must say so."""
-    work = tmp_path / "exercises"
-    shutil.copytree(EXERCISES_DIR / "cosine-hemisphere", work / "cosine-hemisphere")
-    (work / "cosine-hemisphere" / "cosine_hemisphere.py").write_text(textwrap.dedent("""
+    rc, out = check_exercise_source(tmp_path, "cosine-hemisphere", textwrap.dedent("""
         import math
         import numpy as np
 
@@ -118,7 +99,6 @@ def test_wrong_distribution_is_caught(tmp_path):
             ws = [square_to_cosine_hemisphere(a, b) for a, b in u]
             return sum(sky(w) * w[2] / cosine_hemisphere_pdf(w) for w in ws) / n
         """))
-    rc, out = _check("cosine-hemisphere", solution=False, exercises_dir=work)
     assert rc == 1, out
     failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
     assert any("cosine law" in line for line in failed), out
@@ -131,9 +111,7 @@ def test_sppm_update_without_the_flux_rescale_is_caught(tmp_path):
     """The classic slip of the SPPM exercise: the radius shrinks but tau is kept (tau' = tau + Phi),
     so old photons are counted as if they had fallen into the smaller disc. The checks must say so,
     and must still accept its N and R updates."""
-    work = tmp_path / "exercises"
-    shutil.copytree(EXERCISES_DIR / "sppm-update", work / "sppm-update")
-    (work / "sppm-update" / "sppm_update.py").write_text(textwrap.dedent("""
+    rc, out = check_exercise_source(tmp_path, "sppm-update", textwrap.dedent("""
         import math
 
         def progressive_update(N, r2, tau, M, phi, alpha):
@@ -145,7 +123,6 @@ def test_sppm_update_without_the_flux_rescale_is_caught(tmp_path):
         def radiance(tau, r2, n_emitted):
             return tau / (math.pi * r2 * n_emitted)
         """))
-    rc, out = _check("sppm-update", solution=False, exercises_dir=work)
     assert rc == 1, out
     failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
     assert any("density form" in line for line in failed), out

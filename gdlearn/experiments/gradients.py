@@ -96,8 +96,8 @@ def gradient_errors(methods, scenes, *, spp: int, seeds, references, spp_per_pas
     """Render every method on every scene at ``spp`` samples per pixel for every seed and measure
     its gradients against the reference's finite differences (the STAR's Fig. 5 at equal samples).
 
-    ``methods``: specs for :meth:`Method.parse` (``"pt"``, ``"gpt-replay"``, or ``Method(label,
-    "gpt", None, (("shift", policy),))``). ``scenes``: paths, :class:`SceneFile` s or scene objects.
+    ``methods``: specs for :meth:`Method.parse <gdlearn.experiments.study.Method.parse>` (``"pt"``, ``"gpt-replay"``, or ``Method(label,
+    "gpt", None, (("shift", policy),))``). ``scenes``: paths, :class:`~gdlearn.experiments.study.SceneFile` objects or scene objects.
     ``seeds``: a count (0..N-1) or a list. ``references``: scene name -> image or Reference.
     Returns one record per run: method, scene, seed, spp, shifted (False: finite differences of the
     primal), grad_relmse, gx_relmse, gy_relmse, seconds (render time, JIT excluded) and the

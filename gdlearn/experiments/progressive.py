@@ -145,7 +145,7 @@ def run(integrator, *, seconds: float | None = None, passes: int | None = None, 
     """Render progressively for ``seconds`` of wall time (compile excluded) or ``passes`` passes.
 
     With a time budget and a solver, rendering stops when the time so far plus the expected
-    reconstruction time (:func:`_reserve`) reaches ``seconds``, so the final image -- render plus
+    reconstruction time (:func:`!_reserve`) reaches ``seconds``, so the final image -- render plus
     reconstruction -- costs about ``seconds``, as for a primal method.
 
     Snapshots follow :func:`time_schedule` or :func:`pass_schedule` (``count`` points); the last one

@@ -7,10 +7,10 @@ using BRE with a ..."). gdlearn does the same, and keeps the reference's own noi
 * :func:`render_reference` -- a long run of a gdlearn estimator (default ``pt``), cached in
   ``$GDLEARN_CACHE/references`` (default ``~/.cache/gdlearn/references``) under a key made of the
   scene's *content* (the file and every file it references), the estimator, spp, seed, options and
-  gdlearn's source (:func:`gdlearn.source_hash`): editing the scene or any of gdlearn's code never
+  gdlearn's source (:func:`!gdlearn.source_hash`): editing the scene or any of gdlearn's code never
   reuses a stale image.
 * :func:`mitsuba_reference` -- Mitsuba 3 renders over several seeds (via
-  :func:`gdlearn.crosscheck.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
+  :func:`!gdlearn.crosscheck.mitsuba.mitsuba_mean_stderr`), an estimator written by other people.
 * :func:`load_reference` -- an image file (``.npz`` from this cache, ``.npy``, ``.exr``).
 
 Every :class:`Reference` carries a per-pixel variance estimate when one is known (the two

@@ -21,6 +21,7 @@ import inspect
 
 import numpy as np
 
+#: the solver names of the CLI's ``--solver`` and of :class:`~gdlearn.experiments.study.Method` specs
 SOLVER_NAMES = ("cv", "cv-weighted", "l2", "l1")
 #: solver name -> (function name in gdlearn.reconstruct, whether it wants variances as weights)
 _FUNCTIONS = {

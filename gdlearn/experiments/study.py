@@ -212,7 +212,7 @@ def equal_time(methods, scenes, *, seconds: float | None = None, passes: int | N
     ``methods``: specs for :meth:`Method.parse` (``"pt"``, ``"gpt+l1"``, classes, Methods).
     ``seeds``: a count (seeds 0..N-1) or a list. ``references``: scene name -> reference (array or
     :class:`~gdlearn.experiments.references.Reference`), or one reference for a single scene.
-    ``executor``: anything :func:`~gdlearn.experiments.executors.get_executor` accepts, default a
+    ``executor``: anything :func:`!gdlearn.experiments.executors.get_executor` accepts, default a
     one-worker local process pool. ``count`` and ``first``: snapshots per run and the time of the
     first one (:func:`~gdlearn.experiments.progressive.time_schedule`).
     """

@@ -124,6 +124,9 @@ class ProgressiveIntegrator:
 
     # -- to be implemented -------------------------------------------------------------------------
     def render_pass(self, pass_index: int) -> PassResult:   # pragma: no cover - abstract
+        """Render pass ``pass_index`` (0, 1, ...) and return its :class:`~gdlearn.integrators.base.PassResult`;
+        every estimator implements this, :meth:`~gdlearn.integrators.base.ProgressiveIntegrator.step`
+        folds the result into the frame."""
         raise NotImplementedError
 
     def compile(self) -> float:

@@ -26,7 +26,7 @@ def combine_gradients(diffs: np.ndarray, weights=SHIFT_WEIGHTS) -> tuple[np.ndar
     differences.
 
     ``diffs[k, y, x]`` is the mean over base paths of pixel (x, y) of (offset - base) for shift k
-    (order :data:`RIGHT`, :data:`LEFT`, :data:`DOWN`, :data:`UP`); entries of shifts that left the
+    (order :data:`!RIGHT`, :data:`!LEFT`, :data:`!DOWN`, :data:`!UP`); entries of shifts that left the
     image are ignored. Returns ``gx, gy`` (H x W [x C]) with
 
         gx[y, x] = w_f * diffs[RIGHT, y, x] - w_b * diffs[LEFT, y, x+1]   (x < W-1)
@@ -49,7 +49,7 @@ def mis_primal(out: np.ndarray) -> np.ndarray:
     """Kettunen et al. 2015's primal image (Sec. 4 of their paper; STAR Sec. 3.5, Eq. 16-17): every
     pair of neighbours (p, q = p + dir_k) has two techniques for I_p, "sample in p" and "sample in q,
     shift back to p", combined by the balance weights of Eq. 17 that the kernel already applied. With
-    the kernel's buffers ``out`` (9, H, W, 3) (:func:`gpt_rows`: L, D_k, S_k) pair k estimates
+    the kernel's buffers ``out`` (9, H, W, 3) (:func:`!gpt_rows`: L, D_k, S_k) pair k estimates
 
         I_p ~ (S_k - D_k)[p] + S_opp(k)[p + dir_k]      (= w C of p's paths + w' C' of q's offsets)
 

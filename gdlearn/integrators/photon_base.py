@@ -15,7 +15,7 @@ Gruson et al. 2018 §6):
 ``gather``, ``update``), so equal-time studies see where a photon estimator spends its time.
 
 Random numbers: light path j of pass i draws ``rand(seed, LIGHT_KEY0 + j, i, dim)``
-(:data:`gdlearn.kernels.rng.LIGHT_KEY0`): a key space disjoint from the pixels' ``y * W + x``, so
+(:data:`!gdlearn.kernels.rng.LIGHT_KEY0`): a key space disjoint from the pixels' ``y * W + x``, so
 a photon map is a pure function of (scene, seed, pass) -- the same for 1 and 2 threads, and the
 same photons for a gradient estimator's base and offset gather points. An estimator that needs two
 independent halves inside one pass (for the weighted reconstructions, at equal radius) gives half
@@ -54,6 +54,8 @@ class PhotonPassIntegrator(ProgressiveIntegrator):
         return photons
 
     def gather(self, accel, pass_index: int) -> PassResult:   # pragma: no cover - abstract
+        """The camera pass: estimate every pixel from the photons in ``accel`` (what :meth:`build`
+        returned); each estimator implements this."""
         raise NotImplementedError
 
     def update_radius(self, pass_index: int) -> None:
@@ -72,6 +74,7 @@ class PhotonPassIntegrator(ProgressiveIntegrator):
 
     # -- the skeleton --------------------------------------------------------------------------------
     def render_pass(self, pass_index: int) -> PassResult:
+        """One pass: trace photons, build, gather, update the radius, each stage timed."""
         t0 = time.perf_counter()
         photons = self.trace_photons(pass_index)
         t1 = time.perf_counter()

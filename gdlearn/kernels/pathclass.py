@@ -29,7 +29,7 @@ Every path with interior vertices in {D, G, S, M} falls in exactly one class. A 
 material with lobes of two classes (a plastic: delta or microfacet coating over a diffuse base) is
 of the class of the lobe that produced the next direction. For BSDF samples that is the sampled lobe;
 a next-event term, which no lobe produced, is split by each lobe's posterior probability of having
-produced its direction (:func:`gdlearn.kernels.bsdf.dispatch.nee_class_share`), so the two MIS strategies
+produced its direction (:func:`!gdlearn.kernels.bsdf.dispatch.nee_class_share`), so the two MIS strategies
 estimate the same per-class image and the classes still sum to the full one. Since the light end
 is reached last, the state tracks: the number of interior vertices, which vertex classes occurred,
 the length of the current trailing run of specular vertices and the class of the last non-specular

@@ -27,7 +27,7 @@ _C10, _C12, _C14, _C16 = -1.0 / 3628800.0, 1.0 / 479001600.0, -1.0 / 87178291200
 
 @inlined
 def sincos_quarter(a):
-    """(sin a, cos a) for |a| <= pi/4 by polynomials: a few multiply-adds instead of a call into
+    """(sin a, cos a) for ``|a| <= pi/4`` by polynomials: a few multiply-adds instead of a call into
     libm's sincos (whose argument reduction the concentric map does not need; the call was ~7% of
     a Cornell-box path). Accurate to about an ulp on that range."""
     a2 = a * a
@@ -59,7 +59,7 @@ def square_to_uniform_disk_concentric(u1, u2):
     """Shirley-Chiu concentric map of the unit square to the unit disk (area-preserving, low
     distortion); Mitsuba's ``warp::square_to_uniform_disk_concentric``. Returns (x, y).
 
-    The angle is phi = (pi/4) (y/x) in the sectors |x| > |y|, else pi/2 - (pi/4) (x/y), so
+    The angle is phi = (pi/4) (y/x) in the sectors ``|x| > |y|``, else pi/2 - (pi/4) (x/y), so
     cos/sin of phi are cos/sin (or sin/cos) of an angle in [-pi/4, pi/4]: :func:`sincos_quarter`."""
     x = 2.0 * u1 - 1.0
     y = 2.0 * u2 - 1.0

@@ -2,8 +2,8 @@
 
 Works on images alone (numpy / scipy / numba); it knows nothing of rays.
 
-Conventions
------------
+**Conventions**
+
 * Images are ``H x W x C`` float64 arrays (``H x W`` is accepted and returned as ``H x W``);
   ``primal``, ``gx`` and ``gy`` must have the same shape (otherwise ``ValueError``).
 * Forward differences: ``gx[y, x] ~ I[y, x+1] - I[y, x]``, ``gy[y, x] ~ I[y+1, x] - I[y, x]``.
@@ -19,8 +19,8 @@ Conventions
   is the papers' default; ``alpha = 0`` integrates the gradients alone, the free constant fixed
   to the primal's mean.
 
-API: every solver returns a :class:`Reconstruction`
----------------------------------------------------
+**API: every solver returns a** :class:`Reconstruction`
+
 ``Reconstruction(image, history, history_kind, nonfinite, iterations, info)``
 
 * :func:`control_variates` ``(primal, gx, gy, iterations=50, *, variances=None, halves=None,
@@ -35,10 +35,10 @@ API: every solver returns a :class:`Reconstruction`
   preconditioner="multigrid", mg_sweeps=1)`` -- IRLS (the reference solver's L1D preset); each
   reweighting makes its weights, diagonal and float64 residual in one pass over the data, then
   solves a float32 correction by CG with a multigrid V-cycle (symmetric SOR smoothing,
-  :mod:`.multigrid`) until its residual halves -- one or two steps -- whose steps go straight into
-  the float64 iterate. All of it runs on the red-black split layout of :mod:`.split` (each row
+  :mod:`!.multigrid`) until its residual halves -- one or two steps -- whose steps go straight into
+  the float64 iterate. All of it runs on the red-black split layout of :mod:`!.split` (each row
   its even, then its odd columns: a half-sweep computes only the colour it moves); driver in
-  :mod:`.irls`. ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1 energy
+  :mod:`!.irls`. ``preconditioner="dct"`` keeps the DCT-preconditioned path; history: L1 energy
   per reweighting.
 
 Speed at 1280 x 720 x 3, what made the difference and what is left: ``benchmarks/README.md``

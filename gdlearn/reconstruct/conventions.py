@@ -206,8 +206,8 @@ def variances_from_halves(halves: dict, pool: int = 0) -> dict[str, np.ndarray]:
     describes for photon mapping (Hua et al. 2019, Sec. 5.2).
 
     ``pool = r > 0`` replaces each estimate by the larger of itself and a statistic of the
-    estimates in the (2r + 1)^2 window around the pixel (:func:`pool_variance`; the statistic per
-    buffer is :data:`POOL_STATISTIC`, ``"mean"`` for names not listed there). The window has about
+    estimates in the (2r + 1)^2 window around the pixel (:func:`~gdlearn.reconstruct.conventions.pool_variance`; the statistic per
+    buffer is :data:`~gdlearn.reconstruct.conventions.POOL_STATISTIC`, ``"mean"`` for names not listed there). The window has about
     (2r + 1)^2 degrees of freedom instead of one, so a pixel whose two halves happen to agree is no
     longer trusted blindly; keeping the pixel's own estimate where it is larger stops the window
     from diluting an isolated high-variance pixel (a firefly, the edge of a light) into trust. The

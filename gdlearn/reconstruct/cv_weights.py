@@ -1,7 +1,7 @@
 """Weights of the weighted control variates (Hua et al. 2019, Sec. 5.2, Eq. 20-22).
 
 Variances from two half-buffers (``halves=``) are pooled over each pixel's 3 x 3 window
-(``variance_pool=1``, :func:`gdlearn.reconstruct.conventions.variances_from_halves`): each estimate
+(``variance_pool=1``, :func:`gdlearn.reconstruct.variances_from_halves`): each estimate
 becomes the larger of itself and its window's median (primal) or mean (gradients). The per-pixel
 estimate (A - B)^2 / 4 has one degree of freedom: in a pixel whose two halves happen to agree it is
 near zero, Eq. 21 then trusts that pixel's identities almost alone, and the early snapshots of a

@@ -235,8 +235,8 @@ def poisson_l1(primal, gx, gy, alpha: float = 0.2, *, irls_iterations: int = 20,
     the multigrid path -- the same step), eps = eps0 * eps_decay^(k-1),
     and runs preconditioned CG from the current image for at most ``cg_iterations`` steps.
 
-    ``preconditioner="multigrid"`` (default, :mod:`.irls`): CG on the float32 correction with a
-    V-cycle of ``mg_sweeps`` red-black symmetric-SOR sweeps (omega 1.2, :mod:`.multigrid`; an
+    ``preconditioner="multigrid"`` (default, :mod:`!.irls`): CG on the float32 correction with a
+    V-cycle of ``mg_sweeps`` red-black symmetric-SOR sweeps (omega 1.2, :mod:`!.multigrid`; an
     int or one per level), stopped when the
     residual has dropped to ``tol`` (default 0.5) times its value at the start of the
     reweighting -- typically one or two steps; ``precond_dtype`` (float32 by default) is the

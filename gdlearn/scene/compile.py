@@ -3,22 +3,22 @@
 Every kernel takes the compiled scene ``sa`` (a NamedTuple of contiguous arrays, which numba passes
 as a struct of array views: no per-call cost inside compiled code) and reads:
 
-===============  ===========================  ==================================================
-field            dtype / shape                meaning
-===============  ===========================  ==================================================
-prims            f64 (N, PRIM_WIDTH)          primitive rows (kernels/geometry.py), BVH order
-prim_info        i32 (N, INFO_WIDTH)          type, material, emitter, media, shape index
-prim_area        f64 (N,)                     surface area of each primitive
-nodes, node_info f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/accel/bvh.py)
-materials        f64 (B, MAT_WIDTH)           BSDF rows (kernels/layout.py, bsdf.material_row)
-media            f64 (K, MED_WIDTH)           homogeneous media (sigma_t, albedo, g)
-emitters         f64 (E, EM_WIDTH)            emitter rows (kernels/lights.py)
-em_prims, em_cdf i32 (P,), f64 (P,)           area emitters' primitives, normalised area CDFs
-camera           f64 (CAM_WIDTH,)             perspective camera (kernels/camera.py)
-bsphere          f64 (4,)                     scene bounding sphere: centre, radius
-env              int                          row of the constant emitter, -1 if none
-camera_medium    int                          medium row the camera sits in, -1 = vacuum
-===============  ===========================  ==================================================
+================  ===========================  ==================================================
+field             dtype / shape                meaning
+================  ===========================  ==================================================
+prims             f64 (N, PRIM_WIDTH)          primitive rows (kernels/geometry.py), BVH order
+prim_info         i32 (N, INFO_WIDTH)          type, material, emitter, media, shape index
+prim_area         f64 (N,)                     surface area of each primitive
+nodes, node_info  f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/accel/bvh.py)
+materials         f64 (B, MAT_WIDTH)           BSDF rows (kernels/layout.py, bsdf.material_row)
+media             f64 (K, MED_WIDTH)           homogeneous media (sigma_t, albedo, g)
+emitters          f64 (E, EM_WIDTH)            emitter rows (kernels/lights.py)
+em_prims, em_cdf  i32 (P,), f64 (P,)           area emitters' primitives, normalised area CDFs
+camera            f64 (CAM_WIDTH,)             perspective camera (kernels/camera.py)
+bsphere           f64 (4,)                     scene bounding sphere: centre, radius
+env               int                          row of the constant emitter, -1 if none
+camera_medium     int                          medium row the camera sits in, -1 = vacuum
+================  ===========================  ==================================================
 
 Rectangles and cubes become triangles exactly as Mitsuba 3 tessellates them (a rectangle is the
 quad [-1,1]^2 x {0}; a cube is the mesh of [-1,1]^3 with outward faces), spheres and disks stay

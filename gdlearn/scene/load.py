@@ -1,7 +1,7 @@
 """``load(path, **defaults) -> Scene``: the documented subset of Mitsuba 3's XML (scenes/README.md).
 
 The road (ARCHITECTURE.md): XML text -> elements with line numbers and ``$name`` substituted
-(:mod:`.xmlvalues`) -> one builder per plugin (:mod:`.plugins`; shapes and references here) ->
+(:mod:`!.xmlvalues`) -> one builder per plugin (:mod:`!.plugins`; shapes and references here) ->
 a validated :class:`~gdlearn.scene.model.Scene`. Semantics and defaults are Mitsuba 3's (v3.9):
 a scene that loads here loads in ``mitsuba.load_file`` with the same keyword arguments and means
 the same thing. Anything outside the subset, and any invalid value, raises one
@@ -10,7 +10,7 @@ the same thing. Anything outside the subset, and any invalid value, raises one
 Shapes (Mitsuba 3 shape plugins): ``rectangle`` = [-1,1]^2 at z=0 with normal +z; ``cube`` =
 [-1,1]^3; ``disk`` = unit disk at z=0, normal +z; ``sphere`` = ``center`` (0,0,0) and ``radius`` (1)
 folded into ``to_world`` as ``to_world @ T(center) @ S(radius)``; ``obj``/``ply`` meshes are read by
-:mod:`.meshio` and stored in world space (vertex normals unless ``face_normals``). A shape without a
+:mod:`!.meshio` and stored in world space (vertex normals unless ``face_normals``). A shape without a
 bsdf gets Mitsuba's default: diffuse 0.5, or diffuse 0 (black) when the shape carries an area
 emitter (Mitsuba 3's ``Shape`` constructor sets ``reflectance`` to 0 for emitters).
 """

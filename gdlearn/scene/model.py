@@ -105,17 +105,17 @@ class Medium:
 class BSDF:
     """One BSDF with Mitsuba 3's defaults.
 
-    type: diffuse | conductor | roughconductor | dielectric | roughdielectric | plastic |
-          roughplastic | null.
-    reflectance: ``reflectance`` of diffuse (0.5), ``specular_reflectance`` of conductors (1.0, material
-        ``none``), ``diffuse_reflectance`` of plastics (0.5).
-    specular_reflectance: dielectrics' and plastics' specular reflectance scale (1.0).
-    specular_transmittance: dielectrics' transmittance scale (1.0).
-    alpha: microfacet roughness of the rough variants (0.1); ``distribution`` ggx | beckmann
-        (Mitsuba's default: beckmann).
-    int_ior / ext_ior: numeric indices (dielectric: 1.5046 / 1.000277; plastic: 1.49 / 1.000277).
-    nonlinear: plastic's nonlinear internal scattering flag (false).
-    twosided: wrapped in ``<bsdf type="twosided">``.
+    * ``type``: diffuse | conductor | roughconductor | dielectric | roughdielectric | plastic |
+      roughplastic | null.
+    * ``reflectance``: ``reflectance`` of diffuse (0.5), ``specular_reflectance`` of conductors
+      (1.0, material ``none``), ``diffuse_reflectance`` of plastics (0.5).
+    * ``specular_reflectance``: dielectrics' and plastics' specular reflectance scale (1.0).
+    * ``specular_transmittance``: dielectrics' transmittance scale (1.0).
+    * ``alpha``: microfacet roughness of the rough variants (0.1); ``distribution`` ggx | beckmann
+      (Mitsuba's default: beckmann).
+    * ``int_ior`` / ``ext_ior``: numeric indices (dielectric: 1.5046 / 1.000277; plastic: 1.49 / 1.000277).
+    * ``nonlinear``: plastic's nonlinear internal scattering flag (false).
+    * ``twosided``: wrapped in ``<bsdf type="twosided">``.
     """
     type: str = "diffuse"
     reflectance: np.ndarray = field(default_factory=lambda: rgb(0.5))

@@ -1,7 +1,7 @@
 """Balance-heuristic MIS of the forward and backward shifts (STAR, Hua et al. 2019, Eq. 16-17, Sec. 3.5).
 
 The gradient between pixels p and q is estimated from base paths at p shifted to q (forward) and
-base paths at q shifted to p (backward); a path reachable both ways is weighted by Eq. 17
+base paths at q shifted to p (backward); a path reachable both ways is weighted by Eq. 17::
 
     w_pq(x) = p(x) / (p(x) + p(T_pq(x)) |dT_pq/dx|)  =  1 / (1 + r),   r = p_off |J| / p_base.
 
@@ -40,7 +40,7 @@ def mis_weight_from_log_ratio(log_r):
 
 @block
 def mis_weight(p_base, p_offset, jacobian):
-    """Eq. 17 balance weight of the base path, w = p_base / (p_base + p_offset |J|), in ratio form.
+    """Eq. 17 balance weight of the base path, ``w = p_base / (p_base + p_offset |J|)``, in ratio form.
 
     Invalid inputs never give NaN: a zero, negative or NaN offset density or Jacobian means the offset
     could not have been sampled (weight 1); a zero or NaN base density with a valid offset gives 0.
@@ -73,9 +73,9 @@ def mis_weight_products(pdfs_base, pdfs_offset, n, log_jacobian):
 def shift_weights(p_base, p_offset, jacobian, ok):
     """Weights of one base sample and its shift: ``(w_base, w_offset_factor)``.
 
-    The base contribution f(x) is weighted by w_base; the offset contribution f(T(x)) |J| by
+    The base contribution f(x) is weighted by w_base; the offset contribution ``f(T(x)) |J|`` by
     w_offset_factor. For a successful reversible shift both equal Eq. 17's w_pq (the same weight
-    multiplies f(T(x))|J| - f(x) in Eq. 16). For a failed / irreversible one w_base = 1 and the
+    multiplies ``f(T(x))|J| - f(x)`` in Eq. 16). For a failed / irreversible one w_base = 1 and the
     offset factor is 0 (STAR Sec. 3.5).
     """
     if not ok:

@@ -7,12 +7,12 @@ The shift (Eq. 3). A base path x through pixel p is produced by the path tracer 
 uniform numbers u: the film position p + (u0, u1) and then every later decision. The offset path
 x' = T_pq(x) through the neighbour q = p + (dx, dy) is what the same path tracer makes from the
 *same* u at the film position q + (u0, u1) -- shifted by exactly one pixel, so the pixel filter
-gives h_q(T_pq(x)) = h_p(x). With counter-based random numbers (:mod:`gdlearn.kernels.rng`) "the
+gives h_q(T_pq(x)) = h_p(x). With counter-based random numbers (:mod:`!gdlearn.kernels.rng`) "the
 same u" is simply the base pixel's key: ``rand(seed, key_of_p, sample, dim)`` evaluated while
 tracing from q.
 
 Its Jacobian (Eq. 6). u -> x and u -> x' are both the path tracer's sampling map, so
-|dx'/dx| = |dx'/du| |du/dx| = p(x) / p(x'), and the offset term of Eq. 4 becomes (Eq. 7)
+``|dx'/dx| = |dx'/du| |du/dx| = p(x) / p(x')``, and the offset term of Eq. 4 becomes (Eq. 7)::
 
     f(x') |dx'/dx| / p(x) = f(x') / p(x'),
 

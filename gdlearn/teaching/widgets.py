@@ -154,7 +154,7 @@ def progressive_viewer(frames: Sequence, reference=None, *, exposure: float = 0.
                        interval_ms: int = 600):
     """Step (slider) or play (button) through a progressive render.
 
-    ``frames``: :class:`gdlearn.integrators.Frame` objects, snapshots of
+    ``frames``: :class:`~gdlearn.integrators.base.Frame` objects, snapshots of
     :func:`gdlearn.experiments.progressive.run` (``keep_images="all"``), or plain H x W x 3 images. Each frame is labelled with its samples
     per pixel and wall time, plus relMSE when a ``reference`` is given.
     """

@@ -1,30 +1,30 @@
 """Gradient-domain path tracing with shift mappings ("gpt"; Kettunen et al. 2015, STAR Sec. 3-4.1).
 
 Every base path of pixel p (Mitsuba's ``path``, same kernels and random numbers as ``pt``) is shifted
-to the four neighbours in lockstep by a combined shift policy (:mod:`gdlearn.shifts.policy`), and
+to the four neighbours in lockstep by a combined shift policy (:mod:`!gdlearn.shifts.policy`), and
 each base / offset contribution pair is weighted by Eq. 17's balance heuristic
-(:mod:`gdlearn.integrators.path.gpt_surface.lockstep` has the method). The accumulation layout is ``gpt-replay``'s: per
+(:mod:`!gdlearn.integrators.path.gpt_surface.lockstep` has the method). The accumulation layout is ``gpt-replay``'s: per
 base pixel a primal buffer and four shift buffers (right, left, down, up), written by one row each,
 combined afterwards into gx, gy -- with weights (1, 1) here, since the MIS weights are inside the
 buffers (forward and backward weights of one path pair sum to one).
 
-The primal image is Kettunen et al.'s MIS-weighted one (:func:`mis_primal`): each path pair also
+The primal image is Kettunen et al.'s MIS-weighted one (:func:`~gdlearn.integrators.gradients.mis_primal`): each path pair also
 estimates the pixel value twice, from the base path in p and from the offset path shifted back from
 the neighbour, with the same Eq. 17 weights. ``images["primal"]`` is that estimate;
 ``images["primal_base"]`` is the base radiance alone (``pt``'s estimator, same random numbers).
 
-Policies (``shift=``): ``replay`` (the whole path replayed, :mod:`gdlearn.integrators.path.gpt_replay_policy`:
+Policies (``shift=``): ``replay`` (the whole path replayed, :mod:`!gdlearn.integrators.path.gpt_replay_policy`:
 ``gpt-replay``'s estimator, Eq. 17 weights 1/2), the mixed policies ``replay+reconnection`` and
-``halfvector+replay+reconnection`` (:mod:`gdlearn.integrators.path.gpt_surface.mixed`: reconnect where the criterion
+``halfvector+replay+reconnection`` (:mod:`!gdlearn.integrators.path.gpt_surface.mixed`: reconnect where the criterion
 holds from both sides, else replay -- also through a class mismatch -- or copy the half vector between
 two non-connectable vertices; fail only where the backward shift would reconnect),
 ``halfvector+reconnection`` (Kettunen et al.'s: fails on a class mismatch) and
 ``halfvector+reconnection+manifold`` (Kettunen et al.'s plus manifold exploration of specular chains
-between connectable vertices, :mod:`gdlearn.integrators.path.gpt_surface.manifold`). The manifold walk runs only where
+between connectable vertices, :mod:`!gdlearn.integrators.path.gpt_surface.manifold`). The manifold walk runs only where
 the effects plan has specular chains and the scene has analytic specular shapes (``self.manifold``);
 elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy` --
 :data:`DEFAULT_RULE`, with the measurements in benchmarks/README.md. Scenes with media or
-null interfaces run the twin kernel :func:`gdlearn.integrators.path.gpt_volume.lockstep.gpt_volume_rows` (same
+null interfaces run the twin kernel :func:`!gdlearn.integrators.path.gpt_volume.lockstep.gpt_volume_rows` (same
 signature and buffers), imported lazily; it has no manifold walk.
 
 Frame stats: ``paths``, ``nonfinite_samples`` and, per shift action, ``shift_<action>_{run,ok,failed}``
@@ -129,9 +129,9 @@ def _has_null_or_media(setup) -> bool:
 
 def default_policy(setup) -> str:
     """The policy ``shift=None`` picks for a :class:`~gdlearn.integrators.setup.SceneSetup` (its scene,
-    plan and compiled arrays; :data:`DEFAULT_RULE`): :data:`MANIFOLD_POLICY` where the effects plan renders caustics
+    plan and compiled arrays; :data:`DEFAULT_RULE`): :data:`!MANIFOLD_POLICY` where the effects plan renders caustics
     through specular chains, the scene has no media and at least one analytic specular shape the walk
-    can move, else :data:`DEFAULT_POLICY` (measurements in benchmarks/README.md). The plan decides:
+    can move, else :data:`!DEFAULT_POLICY` (measurements in benchmarks/README.md). The plan decides:
     ``--effects direct`` on a caustic scene renders no caustic, so no manifold code runs."""
     if setup.plan.specular_chains and "caustics" in setup.plan.names and not _has_null_or_media(setup):
         if np.any(manifold_table(setup.scene, setup.sa)[:, 0] >= 0.0):

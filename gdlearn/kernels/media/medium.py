@@ -103,7 +103,7 @@ def sample_distance(sigma_t, albedo, t_max, u_channel, u):
 
     A grey medium (equal sigma_t in every channel, as the scenes' scalar ``sigma_t``) needs no
     exponential: pdf(t) = sigma T(t) and P = T(t_max), so the weights are exactly the albedo and 1
-    (:func:`_sample_distance_grey`). Otherwise each channel's exp(-sigma_c t) is computed once and
+    (:func:`!_sample_distance_grey`). Otherwise each channel's exp(-sigma_c t) is computed once and
     shared by the density and the transmittance (the same numbers as computing both separately).
     """
     c = min(int(u_channel * 3.0), 2)

@@ -43,7 +43,7 @@ def hg_sample_cos(g, u):
 
     Textbook form: (1 + g^2 - ((1 - g^2) / (1 - g + 2 g u))^2) / (2 g), which is 0/0 at g = 0.
     Expanded with xi = 2u - 1 and d = 1 + g xi it becomes
-    (xi + g (3 + xi^2 + 2 g xi + g^2 (xi^2 - 1)) / 2) / d^2, finite for every |g| < 1.
+    (xi + g (3 + xi^2 + 2 g xi + g^2 (xi^2 - 1)) / 2) / d^2, finite for every ``|g| < 1``.
     """
     xi = 2.0 * u - 1.0
     d = 1.0 + g * xi
