@@ -28,16 +28,17 @@ def cornell_pt():
                   spp=2048).primal
 
 
-@pytest.mark.parametrize("name", ["sppm", "ppm"])
-def test_converges_to_pt_on_the_cornell_box(name, cornell_pt):
+@pytest.mark.parametrize("name,direct", [("sppm", "photons"), ("ppm", "photons"), ("ppm", "nee")])
+def test_converges_to_pt_on_the_cornell_box(name, direct, cornell_pt):
     """20 passes x 100k light paths at 16 x 16 with radius 0.25 x pixel footprint. The blur bias
     scales with r^2 (measured on this scene after 20 passes: +0.9 % at scale 1, +0.37 % at 0.5,
     +0.03 % at 0.25); the noise of the image mean is ~0.2 %. So 1.5 % on the image mean and 6 % on
     each 4 x 4 block (corners and edges carry the largest blur bias) -- the test of the 1-2 % bias
-    target. A 3 % error in the photon normalisation or a lost light bounce fails it."""
+    target. A 3 % error in the photon normalisation or a lost light bounce fails it. ``ppm`` with
+    ``direct="nee"`` too (sppm's is checked against Mitsuba 3 in test_sppm_mitsuba.py)."""
     sc = _scene("cornell-box.xml", 16)
-    f = render(make(name, sc, seed=1, photons_per_pass=100_000, effects=NO_EMISSION, radius_scale=0.25),
-               passes=20)
+    f = render(make(name, sc, seed=1, photons_per_pass=100_000, effects=NO_EMISSION, radius_scale=0.25,
+                    direct=direct), passes=20)
     rel = f.primal.mean() / cornell_pt.mean() - 1
     assert abs(rel) < 0.015, rel
     blocks = lambda im: im.mean(-1).reshape(4, 4, 4, 4).mean(axis=(1, 3))   # noqa: E731
