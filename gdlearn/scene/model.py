@@ -5,8 +5,8 @@ checked and every reference resolved. It knows nothing about numba; :mod:`gdlear
 flattens it into arrays for the kernels, and :mod:`gdlearn.scene.effects` reads it to decide which
 light transport the scene can show.
 
-Conventions
------------
+**Conventions**
+
 * Colours are ``np.ndarray`` of shape ``(3,)``, float64, linear RGB.
 * Transforms are 4x4 float64 matrices mapping object space to world space (Mitsuba's ``to_world``).
 * Every element remembers where it came from (:class:`Source`) so later stages can still name the
