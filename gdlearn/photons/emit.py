@@ -3,7 +3,7 @@
 Light tracing starts a path at y0 on an emitter with the weight ``Le(y0 -> y1) cos / (p_A(y0)
 p_sigma(w))`` (Veach 1997, Sec. 10.2; pbrt-v3 ``SPPMIntegrator`` photon pass), the power the path
 carries in units of flux per emitted path. Every emitter type of the supported subset
-(:mod:`gdlearn.kernels.lights`, Mitsuba 3 semantics):
+(:mod:`!gdlearn.kernels.lights`, Mitsuba 3 semantics):
 
 ==============  ============================================  =================================
 type            position (area-measure pdf)                   direction (solid-angle pdf)

@@ -28,7 +28,7 @@ pdf_fwd        f64 (n,)     density of this vertex given its parent, in the pare
                             measure carried to this vertex: solid-angle pdf (1 after a null
                             vertex, a delta's discrete probability after a delta lobe) x the
                             free-flight factor of the edge (collision density at a medium vertex,
-                            P(pass) at a surface, 1 in vacuum) x |cos| (1 in a medium) / dist^2 --
+                            P(pass) at a surface, 1 in vacuum) x ``|cos|`` (1 in a medium) / dist^2 --
                             area measure on surfaces, volume measure in media (PHOTONS.md Sec. 0.1,
                             E2); vertex 0: the area pdf of the position, emitter selection included
 pdf_rev        f64 (n,)     the same density of the parent given this vertex, sampled backwards

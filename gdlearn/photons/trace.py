@@ -13,15 +13,15 @@ two corrections importance transport needs:
 
 Participating media (homogeneous; PHOTONS.md Sec. 1.1; the random walk of Jarosz et al. 2008,
 Eq. 11, whose photon weights alpha_i are the flux of Eq. 4): the path knows the medium it is in --
-at the start the one the emitter sits in (:func:`gdlearn.kernels.media.boundary.locate_medium`:
+at the start the one the emitter sits in (:func:`!gdlearn.kernels.media.boundary.locate_medium`:
 no emitter declares a medium, so it is read from the geometry by Mitsuba's interior/exterior rule;
 a point in the unbounded region takes ``TraceParams.outer_medium``, which :class:`LightTracer`
 derives from the scene; one extra ray walk per path in a scene with media, none without), then
-the volpath rules of :mod:`gdlearn.integrators.path.volume`
-(:func:`gdlearn.kernels.media.boundary.next_medium` after every surface, the function volpath
+the volpath rules of :mod:`!gdlearn.integrators.path.volume`
+(:func:`!gdlearn.kernels.media.boundary.next_medium` after every surface, the function volpath
 calls). On every segment inside a medium a
 free-flight distance is sampled with the path tracer's spectral-MIS routine
-(:func:`gdlearn.kernels.media.medium.sample_distance`, Jarosz et al. 2008, Eq. 1-2 and Table 1):
+(:func:`!gdlearn.kernels.media.medium.sample_distance`, Jarosz et al. 2008, Eq. 1-2 and Table 1):
 
 * a collision before the next surface is a K_MEDIUM vertex (a volume photon when
   ``want_volume``); the path takes the weight sigma_s T(t) / pdf(t) (the albedo in a grey medium)
@@ -37,7 +37,7 @@ convex boundary per edge, else 0); a path that would need more ends there.
 
 The pdfs stored (records module): forward, the parent's solid-angle pdf times the edge's free-flight
 factor -- the collision density (1/3) sum_c sigma_c e^(-sigma_c t) at a medium vertex, the pass
-probability at a surface -- times |cos| at a surface (1 at a medium vertex) over dist^2 (PHOTONS.md
+probability at a surface -- times ``|cos|`` at a surface (1 at a medium vertex) over dist^2 (PHOTONS.md
 Sec. 0.1 and E2: volume measure in media, area measure on surfaces; Veach 1997, Sec. 8.2.2 for
 the change of measure); backwards the same with the child's sampling pdf and the parent's cosine.
 
@@ -509,6 +509,8 @@ class LightTracer:
         self._lent = self._spare = None     # the last output handed out / handed back (recycle)
 
     def trace(self, seed: int, pass_index: int, j0: int, n: int) -> LightPaths:
+        """The records of light paths j0 .. j0 + n - 1 of pass ``pass_index`` (paths that leave from
+        their emitter left out unless ``keep_escaped``), in path order."""
         old = numba.get_num_threads()
         if self.threads is not None:
             numba.set_num_threads(int(self.threads))
@@ -543,7 +545,7 @@ class LightTracer:
         return LightPaths(*(f[:total] for f in out))
 
     def recycle(self, records: LightPaths) -> None:
-        """Hand the records of the last :meth:`trace` back once they are no longer used: the next
+        """Hand the records of the last :meth:`LightTracer.trace` back once they are no longer used: the next
         call then writes into the same memory. A pass's records take ~165 B x vertices (150 MB
         for 200k Cornell-box paths), and fresh memory costs a page fault per 4 kB on first touch
         -- measured: compaction into fresh output 4-6x slower than into reused. Records never

@@ -4,13 +4,13 @@ A gather (camera) path is traced from the pixel through specular vertices -- the
 classification the shifts use (``vertex_class`` with the plan's threshold: delta lobes and
 microfacets below it) -- to the first non-specular vertex, the *gather point* (Hachisuka & Jensen
 2009, Sec. 3; PHOTONS.md Sec. 1.7). Emission the path sees on the way (directly or through the
-specular chain) is added exactly. At the gather point the photons within radius r give
+specular chain) is added exactly. At the gather point the photons within radius r give::
 
     L(x, w) ~ sum_p f(x, w, w_p) Phi_p / (|w_p . n_g| pi r^2)           (Jensen 2001, Ch. 7, the radiance estimate)
 
 with Phi_p the photon's power per emitted light path (the caller divides by the number emitted)
-and the 1 / |w_p . n_g| turning the photon's flux per geometric area into the cosine-free form
-``bsdf_eval`` (f |w_p . n_s|) needs. A smooth plastic (a delta coating over a diffuse base) is
+and the ``1 / |w_p . n_g|`` turning the photon's flux per geometric area into the cosine-free form
+``bsdf_eval`` (``f |w_p . n_s|``) needs. A smooth plastic (a delta coating over a diffuse base) is
 split per sample: the delta lobe continues the chain, the base becomes a gather point weighted by
 1 / P(base).
 

@@ -30,7 +30,7 @@ share N and R, driven by both halves' photon counts (PHOTONS.md Sec. 1.4: all fl
 point share R and N), so they are independent given the radius sequence only; in ``ppm`` the
 radius is a fixed schedule and the halves are fully independent. The effects plan decides
 what is traced (:class:`gdlearn.photons.trace.TraceParams`) and what is gathered
-(:class:`gather.GatherParams`).
+(:class:`gdlearn.integrators.photon.gather.GatherParams`).
 """
 from __future__ import annotations
 
