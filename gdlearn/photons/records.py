@@ -118,21 +118,6 @@ def allocate(n: int, empty: bool = False) -> LightPaths:
                       np.zeros(n, np.int32), np.full(n, -1, np.int16))
 
 
-def concatenate(parts: list[LightPaths]) -> LightPaths:
-    """Records of several batches as one, parents re-indexed to the concatenated rows."""
-    if not parts:
-        return allocate(0)
-    offs = np.cumsum([0] + [len(p) for p in parts[:-1]])
-    fields = []
-    for k, name in enumerate(LightPaths._fields):
-        if name == "parent":
-            fields.append(np.concatenate([np.where(p.parent >= 0, p.parent + o, -1).astype(np.int32)
-                                          for p, o in zip(parts, offs)]))
-        else:
-            fields.append(np.concatenate([p[k] for p in parts]))
-    return LightPaths(*fields)
-
-
 #: (dtype, width) of every field, in LightPaths order
 FIELD_TYPES = (("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 1), ("f8", 1), ("i1", 1),
                ("i4", 1), ("i4", 1), ("i1", 1), ("i1", 1), ("i4", 1), ("i8", 1), ("i4", 1), ("i2", 1))
