@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from experiments_fake import SIGMA, FakeGradient, FakePrimal, fake_solver, truth
+from experiments_fake import PASS_SECONDS, SIGMA, FakeGradient, FakePrimal, VirtualClock, fake_solver, truth
 from gdlearn.experiments import progressive as P
 from gdlearn.experiments.metrics import RELMSE_EPS
 
@@ -31,11 +31,23 @@ def test_pass_budget_snapshots_and_compile_apart():
     assert run.final.spp == 40 and run.final.stats["paths"] == 40 * 48
 
 
-def test_time_budget_is_respected():
+@pytest.fixture
+def clock(monkeypatch):
+    """Virtual time for the time-budget tests (experiments_fake.VirtualClock): their assertions
+    about seconds then hold on a loaded machine too, where a real 2 ms sleep may take 20 ms."""
+    import time
+    c = VirtualClock()
+    monkeypatch.setattr(time, "perf_counter", c.perf_counter)
+    monkeypatch.setattr(time, "sleep", c.sleep)
+    return c
+
+
+def test_time_budget_is_respected(clock):
     run = P.run(FakePrimal(seed=2), seconds=0.06, count=5, keep_images="none")
     r = [s.render_seconds for s in run.snapshots]
     assert all(b > a for a, b in zip(r, r[1:]))
     assert r[-1] >= 0.06 and len(run.snapshots) <= 5
+    assert r[-1] < 0.06 + PASS_SECONDS + 1e-12          # virtual time: it stops within one pass
     assert run.final.image is None
 
 
@@ -99,13 +111,14 @@ def _slow_solver(frame):
     return frame.primal
 
 
-def test_time_budget_reserves_the_final_reconstruction():
+def test_time_budget_reserves_the_final_reconstruction(clock):
     run = P.run(FakeGradient(seed=1), seconds=0.4, count=4, first=0.05, solver=_slow_solver)
     snaps = run.snapshots
     reserve = min(s.reconstruct_seconds for s in snaps[:-1])
-    assert len(snaps) >= 3 and reserve >= 0.1
+    assert len(snaps) >= 3 and reserve == pytest.approx(0.1)     # the solver's virtual 0.1 s
     # rendering stopped once render time + reserve reached the budget, not at the budget itself
     # (a fake pass takes 2 ms, far less than the 0.1 s margin)
-    assert 0.4 - reserve <= snaps[-1].render_seconds < 0.4
+    assert 0.4 - reserve - 1e-12 <= snaps[-1].render_seconds < 0.4
+    assert snaps[-1].render_seconds < 0.4 - reserve + PASS_SECONDS + 1e-12   # and within one pass of it
     assert P._reserve(snaps[:1], 0.4) == 0.0          # one measurement is not trusted
     assert P._reserve(snaps, 0.1) == 0.05             # never more than half the budget
