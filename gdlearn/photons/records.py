@@ -109,16 +109,14 @@ class LightPaths(NamedTuple):
 def allocate(n: int, empty: bool = False) -> LightPaths:
     """Records for ``n`` vertices: ``kind`` = -1 marks unused slots, or, with ``empty``, left
     uninitialised for a writer that fills every field of every row (the compaction)."""
+    shape = lambda w: (n, 3) if w == 3 else n   # noqa: E731
     if empty:
-        return LightPaths(*(np.empty((n, 3) if w == 3 else n, dtype=t) for t, w in FIELD_TYPES))
-    f3 = lambda: np.zeros((n, 3))   # noqa: E731
-    return LightPaths(f3(), f3(), f3(), f3(), f3(), np.zeros(n), np.zeros(n), np.full(n, -1, np.int8),
-                      np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.full(n, -1, np.int8),
-                      np.zeros(n, np.int8), np.full(n, -1, np.int32), np.zeros(n, np.int64),
-                      np.zeros(n, np.int32), np.full(n, -1, np.int16))
+        return LightPaths(*(np.empty(shape(w), dtype=t) for t, w, _ in FIELDS))
+    return LightPaths(*(np.full(shape(w), fill, dtype=t) for t, w, fill in FIELDS))
 
 
-#: (dtype, width) of every field, in LightPaths order
-FIELD_TYPES = (("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 3), ("f8", 1), ("f8", 1), ("i1", 1),
-               ("i4", 1), ("i4", 1), ("i1", 1), ("i1", 1), ("i4", 1), ("i8", 1), ("i4", 1), ("i2", 1))
-BYTES_PER_VERTEX = sum(np.dtype(t).itemsize * w for t, w in FIELD_TYPES)
+#: (dtype, width, value of an unused slot) of every field, in LightPaths order
+FIELDS = (("f8", 3, 0.0), ("f8", 3, 0.0), ("f8", 3, 0.0), ("f8", 3, 0.0), ("f8", 3, 0.0), ("f8", 1, 0.0),
+          ("f8", 1, 0.0), ("i1", 1, -1), ("i4", 1, -1), ("i4", 1, -1), ("i1", 1, -1), ("i1", 1, 0),
+          ("i4", 1, -1), ("i8", 1, 0), ("i4", 1, 0), ("i2", 1, -1))
+BYTES_PER_VERTEX = sum(np.dtype(t).itemsize * w for t, w, _ in FIELDS)

@@ -531,10 +531,7 @@ class LightTracer:
             m = min(self.batch, j0 + n - a)
             nv = np.zeros(m, dtype=np.int64)
             trace_batch(self.sa, self.cdf, self.params, seed, pass_index, a, self.slots, nv)
-            off = np.empty(m, dtype=np.int64)
-            off[0] = total
-            np.cumsum(nv[:-1], out=off[1:])
-            off[1:] += total
+            off = total + np.cumsum(nv) - nv          # first output row of each path
             need = total + int(nv.sum())
             if need > len(out):
                 out = _grown(out, total, max(need, 2 * len(out)))
