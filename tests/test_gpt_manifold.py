@@ -20,9 +20,8 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
-from scipy import stats  # noqa: E402
-from test_gpt import (FAMILY_ALPHA, N_SEEDS, OMNIBUS_MAX, ROOT, _frames, _pilot, _scene, _t, block_t,  # noqa: E402
-                      differences, omnibus)
+from test_gpt import (N_SEEDS, OMNIBUS_MAX, ROOT, _frames, _pilot, _scene, block_t, differences,  # noqa: E402
+                      omnibus, projected_t)
 
 from gdlearn.integrators import make, render  # noqa: E402
 from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_MANIFOLD_JACOBIAN  # noqa: E402
@@ -58,17 +57,8 @@ def _run(name, broken=0, effects=None):
 
 
 def _projected_t(dx, dy, pilot):
-    """test_gpt.projected_t, with the regulariser kept positive where most pixels are black (the
-    caustics alone): any pilot keeps the projections' mean 0 under E[d] = 0."""
-    p, v = pilot.primal.mean(axis=-1), pilot.variance().mean(axis=-1)
-    vx, vy = v[:, 1:] + v[:, :-1], v[1:, :] + v[:-1, :]
-    allv = np.concatenate([vx.ravel(), vy.ravel()])
-    reg = max(np.median(allv), np.mean(allv), 1e-12)
-    px, py = (p[:, 1:] - p[:, :-1]) / (vx + reg), (p[1:, :] - p[:-1, :]) / (vy + reg)
-    sx = (dx.mean(axis=-1) * px).sum(axis=(1, 2))
-    sy = (dy.mean(axis=-1) * py).sum(axis=(1, 2))
-    k = stats.t.isf(FAMILY_ALPHA / (2 * 3), df=len(dx) - 1)
-    return float(_t(sx)), float(_t(sy)), float(_t(sx + sy)), k
+    # the regulariser kept positive where most pixels are black (the caustics alone)
+    return projected_t(dx, dy, pilot, robust=True)
 
 
 _PILOTS = {}

@@ -24,8 +24,8 @@ offset is then still a valid path-traced sample of its pixel); only the variance
 """
 import numpy as np
 import pytest
-from scipy import stats
 
+from gdlearn.crosscheck.gradients import block_t, differences, projected_t
 from gdlearn.integrators import make, render
 from gdlearn.scene.load import load
 
@@ -33,8 +33,6 @@ ROOT = __file__.rsplit("/tests/", 1)[0]
 RES = 16
 N_SEEDS = 32
 SPP = 8
-BLOCK = 2
-FAMILY_ALPHA = 1e-3
 PILOT_SPP = 128
 
 
@@ -50,57 +48,6 @@ def _frames(scene, weights=None, **opts):
             integ.shift_weights = weights
         out.append(render(integ, spp=SPP))
     return out
-
-
-def _blocks(a):
-    """Sum over BLOCK x BLOCK pixel blocks of the channel mean of the (seeds, h, w, 3) array a
-    (blocks at the right / bottom edge may be smaller: every pixel is in exactly one block)."""
-    a = a.mean(axis=-1)
-    a = np.add.reduceat(a, np.arange(0, a.shape[1], BLOCK), axis=1)
-    return np.add.reduceat(a, np.arange(0, a.shape[2], BLOCK), axis=2)
-
-
-def differences(frames):
-    """Per seed: d = gx - (P[x+1] - P[x]) and gy - (P[y+1] - P[y]) over the defined region
-    (gx without its last column, gy without its last row), channel-averaged."""
-    p = np.stack([f.primal for f in frames])
-    gx = np.stack([f.gx for f in frames])
-    gy = np.stack([f.gy for f in frames])
-    dx = gx[:, :, :-1] - (p[:, :, 1:] - p[:, :, :-1])
-    dy = gy[:, :-1, :] - (p[:, 1:, :] - p[:, :-1, :])
-    return dx, dy
-
-
-def _t(samples):
-    """|t| of the mean of ``samples`` (axis 0 = seeds) against 0."""
-    se = samples.std(axis=0, ddof=1) / np.sqrt(len(samples))
-    return np.abs(samples.mean(axis=0)) / np.maximum(se, 1e-300)
-
-
-def block_t(dx, dy):
-    """|t| per block for gx and gy, and the Bonferroni threshold k for their number."""
-    tx, ty = _t(_blocks(dx)), _t(_blocks(dy))
-    k = stats.t.isf(FAMILY_ALPHA / (2 * (tx.size + ty.size)), df=len(dx) - 1)
-    return tx, ty, k
-
-
-def projected_t(dx, dy, pilot):
-    """|t| of the per-seed scalars sum(d * v) over gx, over gy and over both; and their threshold.
-
-    A wrong weight biases every gradient in proportion to itself (E[d] = c dI). Projecting d on
-    v = dI / (var(dI) + median var), computed from an *independent* path-traced pilot frame (its
-    finite differences and half-buffer variances: a matched filter), adds that bias up coherently
-    over the whole image -- far more power than any one block. Under a correct shift E[d] = 0 in
-    every pixel, so each projection has mean 0 whatever the pilot. Three two-sided tests,
-    Bonferroni at family level FAMILY_ALPHA."""
-    p, v = pilot.primal.mean(axis=-1), pilot.variance().mean(axis=-1)
-    vx, vy = v[:, 1:] + v[:, :-1], v[1:, :] + v[:-1, :]
-    reg = np.median(np.concatenate([vx.ravel(), vy.ravel()]))   # keeps near-zero variances finite
-    px, py = (p[:, 1:] - p[:, :-1]) / (vx + reg), (p[1:, :] - p[:-1, :]) / (vy + reg)
-    sx = (dx.mean(axis=-1) * px).sum(axis=(1, 2))
-    sy = (dy.mean(axis=-1) * py).sum(axis=(1, 2))
-    k = stats.t.isf(FAMILY_ALPHA / (2 * 3), df=len(dx) - 1)
-    return float(_t(sx)), float(_t(sy)), float(_t(sx + sy)), k
 
 
 def _pilot(scene):

@@ -151,6 +151,20 @@ def test_compare_detects_small_bias_on_synthetic_noise():
     assert not compare(ImageStats(biased, exact.var, exact.dof), exact).ok
 
 
+def test_a_noisy_mean_beyond_the_bound_is_inconclusive_a_precise_one_a_mismatch():
+    """The image mean 8 % high everywhere. Noisy (relative se of the mean ~6 %: the 5 % bound is
+    less than 3 se wide): inconclusive, which the fuzzer answers with more samples. Precise (se
+    ~0.1 %, every block z ~ 10): a mismatch, never inconclusive. Within the bound: no verdict issue."""
+    rng = np.random.default_rng(9)
+    truth = np.ones((16, 16, 3))
+    noisy = compare(_synthetic(rng, 1.08 * truth, 2.5, 8), _synthetic(rng, truth, 2.5, 16), rel_bound=0.05)
+    assert noisy.blocks_ok and not noisy.ok and not noisy.mean_resolved and noisy.inconclusive
+    precise = compare(_synthetic(rng, 1.08 * truth, 0.02, 8), _synthetic(rng, truth, 0.02, 16), rel_bound=0.05)
+    assert precise.mean_resolved and not precise.ok and not precise.inconclusive
+    fine = compare(_synthetic(rng, truth, 0.02, 8), _synthetic(rng, truth, 0.02, 16), rel_bound=0.05)
+    assert fine.ok and not fine.inconclusive
+
+
 # -- the harness, proven on Mitsuba alone ------------------------------------------------------------
 _mi_cache: dict = {}
 

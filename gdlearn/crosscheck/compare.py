@@ -128,6 +128,21 @@ class Comparison:
         return self.blocks_ok and self.mean_ok
 
     @property
+    def mean_resolved(self) -> bool:
+        """Is ``rel_bound`` at least 3 standard errors of the relative mean difference wide in every
+        channel? If not, a mean beyond the bound may be noise alone (a random scene's mean can rest
+        on a few bright paths): the comparison needs more samples before it means anything."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            se = np.where(self.z_mean != 0.0, np.abs(self.rel_diff / self.z_mean), 0.0)
+        return bool(np.all(self.rel_bound >= 3.0 * se))
+
+    @property
+    def inconclusive(self) -> bool:
+        """Failed on the image mean alone, which is not resolved (:attr:`mean_resolved`)."""
+        return (not self.ok) and self.blocks_ok and bool(np.all(np.abs(self.z_mean) < self.bound_mean)) \
+            and not self.mean_resolved
+
+    @property
     def mean_z2(self) -> float:
         """Mean z^2 over the finite blocks: ~1 when both images agree and the noise is calibrated."""
         z = self.z[np.isfinite(self.z)]
@@ -145,7 +160,8 @@ class Comparison:
     def summary(self) -> str:
         w = self.worst()
         n_bad = int(np.sum(np.abs(self.z) >= self.bound))
-        return (f"{'OK' if self.ok else 'MISMATCH'}: {n_bad}/{self.z.size} blocks beyond the bound; "
+        verdict = "OK" if self.ok else ("INCONCLUSIVE" if self.inconclusive else "MISMATCH")
+        return (f"{verdict}: {n_bad}/{self.z.size} blocks beyond the bound; "
                 f"worst block rows {w['rows'][0]}:{w['rows'][1]} cols {w['cols'][0]}:{w['cols'][1]} "
                 f"channel {w['channel']}: z = {w['z']:+.2f} (bound {w['bound']:.2f}), "
                 f"test/ref = {w['ratio']:.4f}; image mean test/ref - 1 = "

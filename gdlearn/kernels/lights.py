@@ -11,7 +11,7 @@ Follows Mitsuba 3 (``src/render/scene.cpp`` and ``src/emitters/*.cpp``):
 * ``spot``: ``intensity * falloff / dist^2``, falloff 1 inside ``beam_width``, linear in angle down
   to 0 at ``cutoff_angle`` (``src/emitters/spot.cpp::falloff_curve``); the spot shines along local +z;
 * ``directional``: ``irradiance`` from direction ``-direction`` (delta direction), shadow ray of
-  length 2 r of the scene's bounding sphere;
+  length 2 max(r, |p - c|) for the scene's bounding sphere (c, r) (:func:`infinite_distance`);
 * ``constant``: ``radiance`` from every direction, sampled uniformly on the sphere (pdf 1 / 4 pi).
 
 Emitter rows (``sa.emitters``, float64, ``EM_WIDTH``) hold the parameters; area emitters own the
@@ -41,7 +41,8 @@ EM_CUTOFF = 15      # radians
 EM_INV_TRANS = 16   # 1 / (cutoff - beam_width)
 EM_INV = 17         # 9: spot's inverse to_world 3x3, row-major (world -> local direction)
 EM_BS_R = 26        # scene bounding-sphere radius (directional, constant)
-EM_WIDTH = 28
+EM_BS_C = 28        # 3: scene bounding-sphere centre (directional, constant)
+EM_WIDTH = 31
 
 INV_FOUR_PI = 0.25 / math.pi
 
@@ -124,11 +125,37 @@ def spot_falloff(emitters, em, d_world):
 
 # forceinline: as above
 @inlined
+def infinite_distance(emitters, em, p):
+    """Length of the shadow ray from ``p`` to a directional or constant emitter ``em``:
+    2 max(r, |p - c|) for the scene's bounding sphere (c, r), as Mitsuba 3's ``directional.cpp`` and
+    ``constant.cpp`` (``sample_direction``). The ray thus always leaves the bounding sphere, also from
+    a point outside it: a camera on the sensor, or a medium vertex far out in a global medium, where a
+    fixed 2 r would end the ray early and, in a medium, keep too much transmittance."""
+    dx = p[0] - emitters[em, EM_BS_C]
+    dy = p[1] - emitters[em, EM_BS_C + 1]
+    dz = p[2] - emitters[em, EM_BS_C + 2]
+    return 2.0 * max(emitters[em, EM_BS_R], math.sqrt(dx * dx + dy * dy + dz * dz))
+
+
+# forceinline: as above
+@inlined
+def same_direction_point(emitters, em, p_base, q_base, p):
+    """The light point of a directional or constant emitter seen from ``p`` in the direction of the
+    base's sample ``p_base -> q_base`` (a shift that copies the direction), at the distance
+    :func:`infinite_distance` of ``p`` itself, so an offset's shadow ray is the one its own
+    next-event sample would trace."""
+    dx, dy, dz = q_base[0] - p_base[0], q_base[1] - p_base[1], q_base[2] - p_base[2]
+    f = infinite_distance(emitters, em, p) / math.sqrt(dx * dx + dy * dy + dz * dz)
+    return (p[0] + f * dx, p[1] + f * dy, p[2] + f * dz)
+
+
+# forceinline: as above
+@inlined
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
     """Next-event estimation from point ``p``: pick an emitter uniformly, then a point/direction.
 
     Returns (em, q, nq, d, dist, weight, pdf, pdf_area, is_delta):
-    ``q`` the emitter point (for directional/constant a point 2 r away along d), ``nq`` its normal
+    ``q`` the emitter point (for directional/constant a point :func:`infinite_distance` away along d), ``nq`` its normal
     (zeros for point/spot/directional/constant), ``d`` the unit direction p -> q, ``dist`` |q - p|,
     ``weight`` = Le(q -> p) / pdf (rgb, selection included; Mitsuba's ``em_weight``), ``pdf`` the
     solid-angle pdf at p (selection included; for delta emitters the selection probability),
@@ -176,7 +203,7 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
             if f <= 0.0:
                 return -1, q, zero, d, dist, zero, 0.0, 0.0, True
         return em, q, zero, d, dist, (rgb[0] * f, rgb[1] * f, rgb[2] * f), sel, 0.0, True
-    r2 = 2.0 * emitters[em, EM_BS_R]
+    r2 = infinite_distance(emitters, em, p)
     if et == E_DIRECTIONAL:
         d = (-emitters[em, EM_D], -emitters[em, EM_D + 1], -emitters[em, EM_D + 2])
         q = (p[0] + r2 * d[0], p[1] + r2 * d[1], p[2] + r2 * d[2])

@@ -230,9 +230,10 @@ class _Index:
         return self.ids[k]
 
 
-def _emitter_row(em, bs_radius) -> np.ndarray:
+def _emitter_row(em, bs) -> np.ndarray:
     row = np.zeros(li.EM_WIDTH)
-    row[li.EM_BS_R] = bs_radius
+    row[li.EM_BS_R] = bs[3]
+    row[li.EM_BS_C:li.EM_BS_C + 3] = bs[:3]
     m = np.asarray(em.to_world, dtype=np.float64)
     if em.type == "point":
         row[li.EM_TYPE] = li.E_POINT
@@ -302,6 +303,7 @@ def compile_scene(scene: Scene, plan=None) -> SceneArrays:
         row[li.EM_RGB:li.EM_RGB + 3] = scene.shapes[si].emitter.radiance
         row[li.EM_FIRST], row[li.EM_COUNT], row[li.EM_AREA] = len(em_prims), len(idx), a.sum()
         row[li.EM_BS_R] = bs[3]
+        row[li.EM_BS_C:li.EM_BS_C + 3] = bs[:3]
         em_rows.append(row)
         em_prims.extend(idx.tolist())
         cdf = np.cumsum(a) / a.sum()
@@ -314,7 +316,7 @@ def compile_scene(scene: Scene, plan=None) -> SceneArrays:
                 raise SceneError(em.src.file, em.src.line, "more than one constant emitter",
                                  "keep one <emitter type=\"constant\"> (Mitsuba allows one environment)")
             env = len(em_rows)
-        em_rows.append(_emitter_row(em, bs[3]))
+        em_rows.append(_emitter_row(em, bs))
 
     sensor, film = scene.sensor, scene.sensor.film
     cam = camera_row(sensor.to_world, sensor.fov, sensor.fov_axis, film.width, film.height,

@@ -232,6 +232,33 @@ def nee_class_share(mat, wi, wo, want_coat, want_rest):
     return k if want_coat else 1.0 - k
 
 
+@block
+def lobe_class_ratio(mat_b, wi_b, wo_b, cls_b, mat_o, wi_o, wo_o, threshold):
+    """``(ratio, ok)`` for an offset vertex that continues the base's BSDF-sampled lobe class ``cls_b``
+    (a shift's effect-class label), when the effects mask is restricted.
+
+    A rough plastic's sampled lobe is a draw of the posterior P_x(c) = :func:`nee_class_share`'s coat
+    fraction at the base's (wi_b, wo_b). An offset on a rough plastic keeps the base's label and weighs
+    P_y(c) / P_x(c) at its own (wi_o, wo_o): its expected class-c contribution is then
+    sum_c P_x(c) f(y) P_y(c) / P_x(c) = f(y) P_y(c), the offset path's own share, as the primal
+    estimator of its pixel splits it. Both vertices must be rough plastics with the same class pair;
+    when only one is (or the pairs differ) the label of one side cannot stand for the other's split,
+    so the shift fails (``ok`` False: a symmetric rule, the reverse shift fails as well, so the MIS
+    weights stay complementary). Any other pair: (1, True), the single class is exact."""
+    rp_b = int(mat_b[L.MAT_TYPE]) == L.ROUGHPLASTIC
+    rp_o = int(mat_o[L.MAT_TYPE]) == L.ROUGHPLASTIC
+    if not (rp_b or rp_o):
+        return 1.0, True
+    if not (rp_b and rp_o) or nee_classes(mat_b, threshold) != nee_classes(mat_o, threshold):
+        return 0.0, False
+    coat = cls_b != L.V_DIFFUSE
+    p_b = nee_class_share(mat_b, wi_b, wo_b, coat, not coat)
+    p_o = nee_class_share(mat_o, wi_o, wo_o, coat, not coat)
+    if not p_b > 0.0:
+        return 0.0, False
+    return p_o / p_b, True
+
+
 # --- building rows (Python, once per material) -----------------------------------------------------
 def prepare_material_row(row: np.ndarray) -> np.ndarray:
     """Fill the precomputed MAT_AUX columns of a material row in place (plastics' internal Fresnel

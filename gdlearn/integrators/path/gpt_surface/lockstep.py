@@ -50,10 +50,11 @@ from gdlearn.integrators.path.gpt_surface.mixed import shift_segment_mixed, unpa
 from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                                          I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                                          I_STATE, JOINED, MERGED, FREE, emitted, get3, mul3, nee_at,
-                                                         sc3, set3, shift_direction, vclass_of, _update)
+                                                         relabel, sc3, set3, shift_direction, vclass_of,
+                                                         _update)
 from gdlearn.shifts.policy import conn, decide
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
-from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, sample_emitter
+from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, same_direction_point, sample_emitter
 from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.scene_query import intersect
@@ -63,7 +64,7 @@ from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.integrators.path.gpt_surface.manifold import lookahead_chain, manifold_offset, same_shape
 from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
-                                   SHIFT_RECONNECT, is_mixed, record)
+                                   SHIFT_RECONNECT, SHIFT_REPLAY, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
 from gdlearn.kernels.jit import block, leaf, noalloc
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
@@ -169,7 +170,7 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
                 unpaired(diff, k, cb)
                 continue
             po = get3(of, k, F_POS)
-            qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
+            qo = q if fixed_point else same_direction_point(sa.emitters, em, p, q, po)
             share = _nee_share(mat_o, oi[k, I_STATE], get3(of, k, F_NS), get3(of, k, F_WI), po, qo, cfg)
             if share > 0.0:
                 if oi[k, I_RECONN] == MERGED:
@@ -201,6 +202,8 @@ def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
     p_o = get3(of, k, F_POS)
     ng_o = get3(of, k, F_NG)
     wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack)
+    if ok and action != SHIFT_REPLAY:
+        ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
     if ok and action == SHIFT_RECONNECT:
         set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
         oi[k, I_RECONN] = JOINED

@@ -45,12 +45,13 @@ none (a delta-only base vertex), the neighbour's base path carries that techniqu
 import math
 
 
-from gdlearn.kernels.bsdf.dispatch import bsdf_sample, lobe_class, vertex_class
+from gdlearn.kernels.bsdf.dispatch import bsdf_sample, sampled_lobe_class, vertex_class
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_REPLAY_WEIGHT, BROKEN_REVERSIBILITY, F_BETA, F_NG,
                                                          F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED,
                                                          I_MAT, I_PREV_DELTA, I_RECONN, I_STATE, JOINED, FAILED,
-                                                         get3, mul3, set3, set_hit, shift_direction, vclass_of)
+                                                         get3, mul3, relabel, set3, set_hit, shift_direction,
+                                                         vclass_of)
 from gdlearn.shifts.policy import conn
 from gdlearn.kernels.pathclass import pc_push
 from gdlearn.kernels.scene_query import intersect, occluded
@@ -70,12 +71,14 @@ def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, cfg):
     ok False where the neighbour's path tracer would stop (zero density)."""
     ns_o = get3(of, k, F_NS)
     s, t = coordinate_system(ns_o)
-    wo, wt, pdf, dl = bsdf_sample(mat_o, to_local(get3(of, k, F_WI), s, t, ns_o), u_lobe, u1, u2)
+    wi_o = to_local(get3(of, k, F_WI), s, t, ns_o)
+    wo, wt, pdf, dl = bsdf_sample(mat_o, wi_o, u_lobe, u1, u2)
     if not pdf > 0.0:
         return ZERO3, False, 0, 0.0, False
     if cfg.broken != BROKEN_REPLAY_WEIGHT:
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), wt))
-    return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, cfg.threshold), pdf, dl
+    # the offset sampled its own lobe: its class is exact (a rough plastic's coating or base)
+    return to_world(wo, s, t, ns_o), True, sampled_lobe_class(mat_o, wi_o, u_lobe, dl, cfg.threshold), pdf, dl
 
 
 @noalloc
@@ -127,6 +130,8 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
         # and the backward shift's criterion fails alike)
         wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_RECONNECT, k, of, mat_o, bv, nx, cfg, stack)
         if ok:
+            ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
+        if ok:
             _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats)
             _advance(of, oi, k, p_o, pdf_o, delta_o, lcls)
             return
@@ -139,6 +144,8 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
             return
     else:
         wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, bv, nx, cfg, stack)
+        if ok:
+            ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
         if not ok:
             record(stats, SHIFT_HALFVECTOR, False)
             oi[k, I_ALIVE] = FAILED

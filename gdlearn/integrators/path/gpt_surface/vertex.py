@@ -20,7 +20,10 @@ import math
 
 
 from gdlearn.kernels import layout as L
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample, lobe_class, vertex_class
+from gdlearn.kernels.bsdf.dispatch import (bsdf_eval, bsdf_pdf, bsdf_sample, lobe_class, lobe_class_ratio,
+                                           sampled_lobe_class, vertex_class)
+from gdlearn.kernels.pathclass import ALL_MASK
+from gdlearn.integrators.path.params import VB_SURFACE
 from gdlearn.kernels.pathclass import pc_push
 from gdlearn.kernels.lights import (E_AREA, E_POINT, E_SPOT, EM_AREA, EM_RGB, EM_TYPE, INV_FOUR_PI,
                                     E_CONSTANT, emitter_pdf, eval_emitter, spot_falloff)
@@ -218,7 +221,8 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
         if not pdf > 0.0 or dl != delta_b:
             return ZERO3, False, 0, 0.0, False
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), wt))          # f' J / p_b = f' / p'
-        return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, cfg.threshold), pdf, dl
+        # the offset sampled its own lobe: its class is exact (a rough plastic's coating or base)
+        return to_world(wo, s, t, ns_o), True, sampled_lobe_class(mat_o, wi_o, u_lobe, dl, cfg.threshold), pdf, dl
     if action == SHIFT_RECONNECT:        # Sec. 3.3: join x'_i to x_{i+1}, area Jacobian 1
         w_b, _, _, j_sa, ok = reconnect(x_b, p_o, x_next, ng_next)
         if not ok:
@@ -250,6 +254,29 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
     return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, False, cfg.threshold), pdf, False
 
 
+@noalloc
+def relabel(of, k, mat_o, bv, wo_w, lcls, cfg):
+    """``(ok, class)`` of offset k's vertex after a shift that did not sample its lobe (reconnection,
+    half-vector copy, following the base), when the effects mask is restricted: on a rough plastic
+    the base's sampled label ``bv.cls_b`` with the weight P_y / P_x of
+    :func:`~gdlearn.kernels.bsdf.dispatch.lobe_class_ratio` folded into beta', so the offset's
+    expected per-class value is its own path's split; ``ok`` False fails the shift where that split
+    cannot be carried over (one side a rough plastic, the other not). Unrestricted renders and
+    non-plastic pairs keep ``lcls`` (the class does not matter there, or is exact)."""
+    if cfg.mask == ALL_MASK or bv.delta or bv.kind != VB_SURFACE:
+        return True, lcls
+    ns = get3(of, k, F_NS)
+    s, t = coordinate_system(ns)
+    r, ok = lobe_class_ratio(bv.mat, bv.wi, bv.wo, bv.cls_b, mat_o, to_local(get3(of, k, F_WI), s, t, ns),
+                             to_local(wo_w, s, t, ns), cfg.threshold)
+    if not ok:
+        return False, lcls
+    if int(mat_o[L.MAT_TYPE]) != L.ROUGHPLASTIC:
+        return True, lcls
+    set3(of, k, F_BETA, sc3(get3(of, k, F_BETA), r))
+    return True, bv.cls_b
+
+
 @leaf
 def _update(of, k, f, j, pdf_o, pdf_b):
     """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0: Eq. 17 then
@@ -274,9 +301,13 @@ def follow_base(sa, k, of, oi, bv, cfg):
         f = bsdf_eval(mat, wi_o, wo)
         pdf_o = bsdf_pdf(mat, wi_o, wo)
         _update(of, k, f, 1.0, pdf_o, pdf)
+        ok, lcls = relabel(of, k, mat, bv, to_world(wo, s, t, ns), lobe_class(mat, False, cfg.threshold), cfg)
+        if not ok:
+            oi[k, I_ALIVE] = FAILED
+            return
         of[k, F_PREV_PDF] = pdf_o
         oi[k, I_PREV_DELTA] = 0
-        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat, False, cfg.threshold))
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lcls)
         oi[k, I_RECONN] = MERGED
     else:                                   # identical to the base: f' / p = the base's weight
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight))

@@ -19,7 +19,7 @@ from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_JACOBIAN, BROKEN
                                        I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, JOINED, MERGED, FREE, NF, NI, get3,
                                        light_weight, mul3, sc3, set3)
 from gdlearn.kernels.layout import V_MEDIUM
-from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE
+from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, same_direction_point
 from gdlearn.kernels.media.medium import medium_params
 from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
 from gdlearn.kernels.media.phase import hg_eval, hg_sample
@@ -188,7 +188,7 @@ def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, cfg, medium_vertex, 
                     no = nb
                 else:
                     po = get3(of, k, F_POS)
-                    qo = q if fixed_point else (po[0] + q[0] - p[0], po[1] + q[1] - p[1], po[2] + q[2] - p[2])
+                    qo = q if fixed_point else same_direction_point(sa.emitters, em, p, q, po)
                     no = nee_offset(sa, em, qo, nq, of, oi, k, stack)
                 co = mul3(get3(of, k, F_BETA), no)
         pair(diff, summ, of, oi, k, co, cb, cfg)
