@@ -92,6 +92,36 @@ def gpt_manifold_rows(sa, seed, sample0, spp, cfg, out, stats, bad,
               bad, mtab)
 
 
+@block
+def gpt_replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
+    """:func:`gpt_rows` for the policy ``replay`` (whole-path replay, :mod:`gdlearn.integrators.path.gpt_replay_policy`;
+    ``volume``: trace with volpath), in a kernel of its own, so that the shift kernels do not compile
+    the path tracers they never call."""
+    _replay_policy_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats, bad, volume)
+
+
+@rows
+def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
+    h, w = out.shape[1], out.shape[2]
+    inv = 1.0 / spp
+    for y in prange(h):
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        diff = np.zeros((8, 3))
+        acc = np.zeros((9, 3))
+        st = stats[y]
+        for x in range(w):
+            key = y * w + x
+            acc[:] = 0.0
+            for s in range(sample0, sample0 + spp):
+                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+                c = replay_sample(sa, volume, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, diff, st, stack)
+                if not finite_sample(c, diff):
+                    bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
+                    continue
+                add_sample(acc, c, diff)
+            store_means(out, y, x, acc, inv)
+
+
 @rows
 def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
     h, w = out.shape[1], out.shape[2]
@@ -110,12 +140,8 @@ def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
             acc[:] = 0.0
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                if cfg.policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
-                    c = replay_sample(sa, False, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, diff, st,
-                                      stack)
-                else:
-                    c = gpt_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff, st, stack,
-                                   mtab, cf, ci)
+                c = gpt_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff, st, stack,
+                               mtab, cf, ci)
                 if not finite_sample(c, diff):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                     continue
@@ -159,7 +185,11 @@ class GradientPathTracer(ProgressiveIntegrator):
         assert POLICIES[shift] == code
         self.shift, self.policy = shift, code
         self.kernel, self.mtab = gpt_rows, None
-        if _has_null_or_media(st):
+        #: extra kernel arguments after the common ones (the replay kernel's volume flag, the manifold table)
+        self.extra = ()
+        if code == POLICY_REPLAY:
+            self.kernel, self.extra = gpt_replay_policy_rows, (_has_null_or_media(st),)
+        elif _has_null_or_media(st):
             self.kernel = gpt_volume_rows
             if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
                 raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "
@@ -167,7 +197,7 @@ class GradientPathTracer(ProgressiveIntegrator):
         elif code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
             mtab = manifold_table(st.scene, st.sa)
             if st.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
-                self.kernel, self.mtab = gpt_manifold_rows, mtab
+                self.kernel, self.mtab, self.extra = gpt_manifold_rows, mtab, (mtab,)
             else:
                 # no specular chain the walk could move: the manifold code does not run (same estimator)
                 self.policy = POLICY_HALFVECTOR_RECONNECTION
@@ -185,10 +215,7 @@ class GradientPathTracer(ProgressiveIntegrator):
         bad = np.zeros(h, dtype=np.int64)
         with st.parallel(h):
             args = (st.sa, self.seed, sample0, spp, GptParams.of(st, self.policy, self.broken), out, stats, bad)
-            if self.mtab is not None:
-                self.kernel(*args, self.mtab)
-            else:
-                self.kernel(*args)
+            self.kernel(*args, *self.extra)
         return out, stats.sum(axis=0), int(bad.sum())
 
     def compile(self) -> float:

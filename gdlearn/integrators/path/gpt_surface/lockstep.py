@@ -78,7 +78,7 @@ def _wanted(cfg, state):
     return (cfg.mask >> pc_class(state)) & 1 == 1
 
 
-@noalloc
+@leaf
 def _start_offsets(sa, px, of, oi, stack):
     """The pixel shift (Eq. 3): each neighbour's camera ray with the base's sub-pixel jitter (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`)."""
@@ -117,7 +117,7 @@ def _pair(diff, of, oi, k, co, cb, cfg):
             diff[k, c] -= cb[c]
 
 
-@noalloc
+@leaf
 def _emission_pairs(sa, of, oi, diff, cb, cfg):
     for k in range(4):
         co = (0.0, 0.0, 0.0)
@@ -131,7 +131,7 @@ def _emission_pairs(sa, of, oi, diff, cb, cfg):
         _pair(diff, of, oi, k, co, cb, cfg)
 
 
-@noalloc
+@leaf
 def _nee_share(mat, state, ns, wi_world, p, q, cfg):
     """The share of a next-event term at p (towards the light point q) that the effects mask keeps:
     ``surface_path``'s rule (:func:`gdlearn.kernels.bsdf.dispatch.nee_class_share`: a rough plastic's term is
@@ -151,7 +151,7 @@ def _nee_share(mat, state, ns, wi_world, p, q, cfg):
     return nee_class_share(mat, wi, wo, want_coat, want_rest)
 
 
-@noalloc
+@leaf
 def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every offset by
     reconnecting to the same light point (for a constant / directional emitter: the same direction).
@@ -183,7 +183,7 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
         _pair(diff, of, oi, k, co, cb, cfg)
 
 
-@noalloc
+@leaf
 def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
     """Shift offset k's segment leaving its vertex i (base vertex ``bv``: wi -> wo, decided by its class
     ``bv.cls_s``; next vertex ``nx``: p2 or escape, of class ``nx.cls``)."""
@@ -229,7 +229,7 @@ def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
     oi[k, I_STATE] = pc_push(oi[k, I_STATE], lcls)
 
 
-@noalloc
+@leaf
 def _fail_mismatched(sa, mat, oi, stats, cfg):
     """Before the base extends its vertex x_i (next event, next bounce), fail every offset whose x'_i
     is of another kind: escaped (no vertex to continue from), connectable vs not, or delta-only vs
@@ -253,7 +253,7 @@ def _fail_mismatched(sa, mat, oi, stats, cfg):
             oi[k, I_ALIVE] = FAILED
 
 
-@noalloc
+@leaf
 def _roulette(of, oi, beta, eta, u):
     """Mitsuba's survival q = min(max throughput * eta^2, 0.95), the max taken over the base and the
     live offsets; returns q (0: stop). Survivors' throughputs are divided by q by the caller."""
@@ -267,7 +267,7 @@ def _roulette(of, oi, beta, eta, u):
     return q
 
 
-@noalloc
+@leaf
 def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, diff, cfg, stack):
     """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers, ``rng``:
     :class:`~gdlearn.integrators.path.params.PathRng`) and its shifts (:func:`_nee_pairs`); returns the base

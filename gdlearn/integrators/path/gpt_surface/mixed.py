@@ -81,7 +81,7 @@ def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, cfg):
     return to_world(wo, s, t, ns_o), True, sampled_lobe_class(mat_o, wi_o, u_lobe, dl, cfg.threshold), pdf, dl
 
 
-@noalloc
+@leaf
 def inverse_reconnects(sa, lobe_y, cls_x, y_b, x_b, ng_x, hit_y2, prim_y2, y2, ng_y2, cfg, stack):
     """Would the backward shift -- base y (the offset), offset x (the base) -- reconnect x_b to y's next
     vertex y2? C(y_b, x_b, y2) of the module docstring: y's direction at y_b of a connectable lobe
@@ -102,14 +102,14 @@ def unpaired(diff, k, cb):
         diff[k, c] -= cb[c]
 
 
-@noalloc
+@leaf
 def _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats):
     set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
     oi[k, I_RECONN] = JOINED
     record(stats, SHIFT_RECONNECT, True)
 
 
-@noalloc
+@leaf
 def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
     """Shift offset k's segment leaving its vertex by a mixed policy (module docstring). The base
     leaves x_b = ``bv.x`` (:class:`~gdlearn.integrators.path.params.BaseVertex`: geometric normal ng, material

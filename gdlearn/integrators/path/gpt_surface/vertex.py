@@ -84,7 +84,7 @@ def sc3(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@noalloc
+@leaf
 def set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
     """Make (p, ng, ns) of primitive prim, reached along d, offset k's current vertex."""
     set3(of, k, F_POS, p)
@@ -96,7 +96,7 @@ def set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d):
     oi[k, I_MAT] = sa.prim_info[prim, 1] if hit else -1
 
 
-@noalloc
+@leaf
 def emitted(sa, escaped, prim, p, ns, d, prev_p, prev_pdf, prev_delta):
     """Le seen along the travel direction d at hit p (or the constant emitter on escape), MIS-weighted
     against next-event estimation from prev_p exactly as ``surface_path.radiance_path`` does."""
@@ -254,7 +254,7 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
     return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, False, cfg.threshold), pdf, False
 
 
-@noalloc
+@leaf
 def relabel(of, k, mat_o, bv, wo_w, lcls, cfg):
     """``(ok, class)`` of offset k's vertex after a shift that did not sample its lobe (reconnection,
     half-vector copy, following the base), when the effects mask is restricted: on a rough plastic
@@ -286,7 +286,7 @@ def _update(of, k, f, j, pdf_o, pdf_b):
     of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
 
 
-@noalloc
+@leaf
 def follow_base(sa, k, of, oi, bv, cfg):
     """Offset k shares the base vertex x_b (``bv``): same outgoing direction (J = 1). A JOINED offset
     arrives from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""

@@ -57,8 +57,7 @@ from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_
 from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
 from gdlearn.integrators.path.volume import next_medium, shadow_transmittance
 from gdlearn.kernels.arrays import borrowed
-from gdlearn.integrators.path.gpt_replay_policy import replay_sample
-from gdlearn.shifts.policy import POLICY_REPLAY, SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
+from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
@@ -370,13 +369,10 @@ def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
             acc[:] = 0.0
             for s in range(sample0, sample0 + spp):
                 fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                if cfg.policy == POLICY_REPLAY:      # whole-path replay: no pair can fail (gpt_replay_policy)
-                    c = replay_sample(sa, True, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, d8, st, stack)
-                else:
-                    c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff,
-                                          summ, st, stack)
-                    d8[:4] = diff
-                    d8[4:] = summ
+                c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff,
+                                      summ, st, stack)
+                d8[:4] = diff
+                d8[4:] = summ
                 if not finite_sample(c, d8):
                     bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                     continue
