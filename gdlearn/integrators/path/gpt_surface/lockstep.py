@@ -50,7 +50,7 @@ from gdlearn.integrators.path.gpt_surface.mixed import shift_segment_mixed, unpa
 from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                                          I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                                          I_STATE, JOINED, MERGED, FREE, emitted, get3, mul3, nee_at,
-                                                         relabel, sc3, set3, shift_direction, vclass_of,
+                                                         relabel, replayed_class, sc3, set3, shift_direction, vclass_of,
                                                          _update)
 from gdlearn.shifts.policy import conn, decide
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
@@ -203,7 +203,9 @@ def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
     ng_o = get3(of, k, F_NG)
     wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack)
     if ok and action != SHIFT_REPLAY:
-        ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
+        ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)      # lcls: the effect class from here on
+    elif ok:
+        lcls = replayed_class(of, k, mat_o, bv.us[0], delta_o, lcls, cfg)
     if ok and action == SHIFT_RECONNECT:
         set_hit(sa, of, oi, k, True, prim2, p2, ng2, ns2, wo_w)
         oi[k, I_RECONN] = JOINED

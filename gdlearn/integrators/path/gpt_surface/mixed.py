@@ -45,12 +45,12 @@ none (a delta-only base vertex), the neighbour's base path carries that techniqu
 import math
 
 
-from gdlearn.kernels.bsdf.dispatch import bsdf_sample, sampled_lobe_class, vertex_class
+from gdlearn.kernels.bsdf.dispatch import bsdf_sample, lobe_class, vertex_class
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_REPLAY_WEIGHT, BROKEN_REVERSIBILITY, F_BETA, F_NG,
                                                          F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED,
                                                          I_MAT, I_PREV_DELTA, I_RECONN, I_STATE, JOINED, FAILED,
-                                                         get3, mul3, relabel, set3, set_hit, shift_direction,
+                                                         get3, mul3, relabel, replayed_class, set3, set_hit, shift_direction,
                                                          vclass_of)
 from gdlearn.shifts.policy import conn
 from gdlearn.kernels.pathclass import pc_push
@@ -77,8 +77,7 @@ def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, cfg):
         return ZERO3, False, 0, 0.0, False
     if cfg.broken != BROKEN_REPLAY_WEIGHT:
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), wt))
-    # the offset sampled its own lobe: its class is exact (a rough plastic's coating or base)
-    return to_world(wo, s, t, ns_o), True, sampled_lobe_class(mat_o, wi_o, u_lobe, dl, cfg.threshold), pdf, dl
+    return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, cfg.threshold), pdf, dl
 
 
 @leaf
@@ -130,10 +129,13 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
         # and the backward shift's criterion fails alike)
         wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_RECONNECT, k, of, mat_o, bv, nx, cfg, stack)
         if ok:
-            ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
-        if ok:
+            kept, ecls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
+            if not kept:                  # a rough plastic on one side only: the shift fails (not a
+                record(stats, SHIFT_RECONNECT, False)      # fallback to continuing: the backward
+                oi[k, I_ALIVE] = FAILED                     # shift would reconnect)
+                return
             _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats)
-            _advance(of, oi, k, p_o, pdf_o, delta_o, lcls)
+            _advance(of, oi, k, p_o, pdf_o, delta_o, ecls)
             return
     action = mixed_action(cfg.policy, cb, co)
     if action == SHIFT_REPLAY:
@@ -142,10 +144,11 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
             record(stats, SHIFT_REPLAY, True)
             oi[k, I_ALIVE] = FAILED
             return
+        ecls = replayed_class(of, k, mat_o, us[0], delta_o, lcls, cfg)
     else:
         wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_HALFVECTOR, k, of, mat_o, bv, nx, cfg, stack)
         if ok:
-            ok, lcls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
+            ok, ecls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
         if not ok:
             record(stats, SHIFT_HALFVECTOR, False)
             oi[k, I_ALIVE] = FAILED
@@ -161,7 +164,7 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
     if not ok:
         oi[k, I_ALIVE] = FAILED
         return
-    _advance(of, oi, k, p_o, pdf_o, delta_o, lcls)
+    _advance(of, oi, k, p_o, pdf_o, delta_o, ecls)
 
 
 @leaf

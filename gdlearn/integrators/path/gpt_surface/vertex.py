@@ -221,8 +221,7 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
         if not pdf > 0.0 or dl != delta_b:
             return ZERO3, False, 0, 0.0, False
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), wt))          # f' J / p_b = f' / p'
-        # the offset sampled its own lobe: its class is exact (a rough plastic's coating or base)
-        return to_world(wo, s, t, ns_o), True, sampled_lobe_class(mat_o, wi_o, u_lobe, dl, cfg.threshold), pdf, dl
+        return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, dl, cfg.threshold), pdf, dl
     if action == SHIFT_RECONNECT:        # Sec. 3.3: join x'_i to x_{i+1}, area Jacobian 1
         w_b, _, _, j_sa, ok = reconnect(x_b, p_o, x_next, ng_next)
         if not ok:
@@ -256,8 +255,9 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
 
 @leaf
 def relabel(of, k, mat_o, bv, wo_w, lcls, cfg):
-    """``(ok, class)`` of offset k's vertex after a shift that did not sample its lobe (reconnection,
-    half-vector copy, following the base), when the effects mask is restricted: on a rough plastic
+    """``(ok, effect class)`` of offset k's vertex after a shift that did not sample its lobe
+    (reconnection, half-vector copy, following the base), when the effects mask is restricted (the
+    class for the shift decisions stays ``lcls``): on a rough plastic
     the base's sampled label ``bv.cls_b`` with the weight P_y / P_x of
     :func:`~gdlearn.kernels.bsdf.dispatch.lobe_class_ratio` folded into beta', so the offset's
     expected per-class value is its own path's split; ``ok`` False fails the shift where that split
@@ -275,6 +275,19 @@ def relabel(of, k, mat_o, bv, wo_w, lcls, cfg):
         return True, lcls
     set3(of, k, F_BETA, sc3(get3(of, k, F_BETA), r))
     return True, bv.cls_b
+
+
+@leaf
+def replayed_class(of, k, mat_o, u_lobe, delta_o, lcls, cfg):
+    """The effect class of offset k's vertex after a *replay* (call it before ``set_hit`` moves the
+    offset on): the lobe the offset's own BSDF sampled with the base's ``u_lobe``, exact for a rough
+    plastic's coating or base, in effects-restricted renders. ``lcls`` (:func:`lobe_class`) stays the
+    class for the shift decisions, which must be a function of the path, not of the sampled lobe."""
+    if cfg.mask == ALL_MASK:
+        return lcls
+    ns = get3(of, k, F_NS)
+    s, t = coordinate_system(ns)
+    return sampled_lobe_class(mat_o, to_local(get3(of, k, F_WI), s, t, ns), u_lobe, delta_o, cfg.threshold)
 
 
 @leaf
