@@ -18,7 +18,7 @@ from scipy import stats
 
 from gdlearn.integrators import make, render
 from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_MIS, BROKEN_PRIMAL
-from gdlearn.integrators.path.gpt_volume.lockstep import gpt_volume_rows
+from gdlearn.integrators.path.gpt import select_kernel
 from gdlearn.integrators.path.params import GptParams
 from gdlearn.scene.load import load
 from gdlearn.shifts.policy import N_STATS, policy_code, stats_dict
@@ -60,8 +60,9 @@ def trace(integ, seed, spp, policy, broken=0, sample0=0):
     out = np.zeros((9, h, w, 3))
     st = np.zeros((h, N_STATS), dtype=np.int64)
     bad = np.zeros(h, dtype=np.int64)
-    gpt_volume_rows(integ.setup.sa, seed, sample0, spp, GptParams.of(integ.setup, policy_code(policy), broken), out, st,
-                    bad)
+    # the kernel gpt itself runs for this policy (whole-path replay has one of its own)
+    kernel, extra, code = select_kernel(integ.setup, policy_code(policy))
+    kernel(integ.setup.sa, seed, sample0, spp, GptParams.of(integ.setup, code, broken), out, st, bad, *extra)
     return out, stats_dict(st.sum(axis=0)), int(bad.sum())
 
 

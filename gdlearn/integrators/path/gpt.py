@@ -153,6 +153,28 @@ def _has_null_or_media(setup) -> bool:
     return bool(setup.media) or setup.has_null
 
 
+def select_kernel(setup, code: int):
+    """``(kernel, extra, code)``: the rows kernel that renders policy ``code`` on a
+    :class:`~gdlearn.integrators.setup.SceneSetup`, the arguments it takes after the common ones, and
+    the policy code it runs. Whole-path replay has a kernel of its own (surfaces or media); media and
+    null interfaces take the volume kernel; the manifold policy takes the manifold kernel where the
+    effects plan has specular chains and the walk has an analytic shape to move, else it *is*
+    ``halfvector+reconnection`` (the manifold code would not run: the same estimator)."""
+    if code == POLICY_REPLAY:
+        return gpt_replay_policy_rows, (_has_null_or_media(setup),), code
+    if _has_null_or_media(setup):
+        if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
+            raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "
+                             "halfvector+reconnection")
+        return gpt_volume_rows, (), code
+    if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
+        mtab = manifold_table(setup.scene, setup.sa)
+        if setup.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
+            return gpt_manifold_rows, (mtab,), code
+        return gpt_rows, (), POLICY_HALFVECTOR_RECONNECTION
+    return gpt_rows, (), code
+
+
 def default_policy(setup) -> str:
     """The policy ``shift=None`` picks for a :class:`~gdlearn.integrators.setup.SceneSetup` (its scene,
     plan and compiled arrays; :data:`DEFAULT_RULE`): :data:`!MANIFOLD_POLICY` where the effects plan renders caustics
@@ -184,25 +206,11 @@ class GradientPathTracer(ProgressiveIntegrator):
                              f"one of {', '.join(SUPPORTED)}")
         assert POLICIES[shift] == code
         self.shift, self.policy = shift, code
-        self.kernel, self.mtab = gpt_rows, None
-        #: extra kernel arguments after the common ones (the replay kernel's volume flag, the manifold table)
-        self.extra = ()
-        if code == POLICY_REPLAY:
-            self.kernel, self.extra = gpt_replay_policy_rows, (_has_null_or_media(st),)
-        elif _has_null_or_media(st):
-            self.kernel = gpt_volume_rows
-            if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
-                raise ValueError("gpt: manifold exploration is not implemented in media; fix: use --shift "
-                                 "halfvector+reconnection")
-        elif code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
-            mtab = manifold_table(st.scene, st.sa)
-            if st.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
-                self.kernel, self.mtab, self.extra = gpt_manifold_rows, mtab, (mtab,)
-            else:
-                # no specular chain the walk could move: the manifold code does not run (same estimator)
-                self.policy = POLICY_HALFVECTOR_RECONNECTION
+        #: the rows kernel, its arguments after the common ones (the replay kernel's volume flag, the
+        #: manifold table) and the policy code it runs (:func:`select_kernel`)
+        self.kernel, self.extra, self.policy = select_kernel(st, code)
         #: True when the manifold walk runs for this scene (plan + analytic specular shapes)
-        self.manifold = self.mtab is not None
+        self.manifold = self.kernel is gpt_manifold_rows
         #: fault injection for the tests (gpt_shift.BROKEN_*): a deliberately biased estimator the
         #: unbiasedness tests must reject; 0 is the estimator
         self.broken = 0
