@@ -173,13 +173,14 @@ def random_scene(seed: int) -> FuzzScene:
     return sc
 
 
-#: Optical depth sigma_t * 2 r (about: r is bounded below by the floor, so up to ~2.2) of a directional or constant emitter's shadow ray in a global
-#: medium (r: the scene's bounding-sphere radius; both renderers end that ray 2 r away). Mitsuba 3's
-#: volpath estimates its transmittance by free-flight sampling: the ray survives with probability
-#: exp(-sigma_t 2 r) and weighs 1, else 0. At depth 10 (seed 0 before this cap: sigma_t 1.25, r 4.3)
-#: one sample in 2e4 survives, 8 renders of 128 spp hold a handful of fireflies and most blocks
-#: read exactly 0 with a standard error of 0, so the block test flags noise it cannot see. At depth
-#: ~2 every pixel keeps >= 10 % survivors and the per-block standard errors are honest.
+#: Cap on the optical depth sigma_t * 2 r of a directional or constant emitter's shadow ray in a
+#: global medium (r: the scene's bounding-sphere radius; the ray is at least 2 r long, more from a
+#: vertex outside the sphere, ``lights.infinite_distance``). Mitsuba 3's volpath estimates that
+#: transmittance by free-flight sampling: the ray survives with probability exp(-depth) and weighs
+#: 1, else 0. At depth 10 (seed 0 before this cap: sigma_t 1.25, r 4.3) one sample in 2e4
+#: survives, 8 renders of 128 spp hold a handful of fireflies and most blocks read exactly 0 with a
+#: standard error of 0, so the block test flags noise it cannot see. Capped at ~2 (up to ~2.2: r is
+#: only bounded below by the floor) every pixel keeps >= 10 % survivors on its shortest rays.
 MAX_INFINITE_DEPTH = 2.0
 _BSPHERE_R = 3.0 * np.sqrt(2.0)      # the floor alone (scale 3, corners at +-3): r >= this
 
@@ -282,12 +283,11 @@ def run_gradient_seed(seed: int, integrator: str, n_seeds: int = GRADIENT_SEEDS,
                       broken: int = 0):
     """The random scene of ``seed`` through a gradient integrator (``gpt`` or ``gpt-replay``): are
     its gradients the finite differences of its own primal, in expectation?
-    (:func:`gdlearn.crosscheck.gradients.check`; no Mitsuba needed: the primal is pt's estimator,
+    (:func:`gdlearn.crosscheck.gradients.render_check`; no Mitsuba needed: the primal is pt's estimator,
     which the image comparison checks against Mitsuba.) ``broken``: a planted bug of
     :mod:`gdlearn.integrators.path.gpt_surface.vertex` (``BROKEN_*``), to show the check can fail.
     Returns ``(GradientCheck, xml)``."""
-    from gdlearn.crosscheck import gradients
-    from gdlearn.integrators import make, render
+    from gdlearn.crosscheck.gradients import render_check
     from gdlearn.scene.load import load
     xml = random_scene(seed).xml()
     path = _write(xml, None)
@@ -295,14 +295,7 @@ def run_gradient_seed(seed: int, integrator: str, n_seeds: int = GRADIENT_SEEDS,
         scene = load(path)
     finally:
         os.unlink(path)
-    frames = []
-    for s in range(n_seeds):
-        integ = make(integrator, scene, seed=1000 + s, spp_per_pass=spp, threads=2)
-        if broken:
-            integ.broken = broken
-        frames.append(render(integ, spp=spp))
-    pilot = render(make("pt", scene, seed=7, spp_per_pass=32, threads=2), spp=128)
-    return gradients.check(frames, pilot, "primal_base" if integrator == "gpt" else "primal"), xml
+    return render_check(scene, integrator, n_seeds=n_seeds, spp=spp, threads=2, broken=broken), xml
 
 
 def shrink(seed: int, spp: int = 64, variant: str = "scalar_rgb", inject=None) -> str:

@@ -121,11 +121,19 @@ def check(frames, pilot, primal: str = "primal") -> GradientCheck:
 
 
 def render_check(scene, integrator: str, *, n_seeds: int = 32, spp: int = 8, pilot_spp: int = 128,
-                 seed0: int = 1000, pilot_seed: int = 7, **opts) -> GradientCheck:
+                 seed0: int = 1000, pilot_seed: int = 7, threads: int | None = None,
+                 broken: int = 0) -> GradientCheck:
     """Render ``scene`` with ``integrator`` (gpt or gpt-replay) at ``n_seeds`` seeds of ``spp`` each
-    and check its gradients against the primal of the same runs (:func:`check`)."""
+    and check its gradients against the primal of the same runs (:func:`check`). ``broken``: a planted
+    bug of :mod:`gdlearn.integrators.path.gpt_surface.vertex` (``BROKEN_*``, gpt only), to show the
+    check can fail."""
     from gdlearn.integrators import make, render
-    frames = [render(make(integrator, scene, seed=seed0 + s, spp_per_pass=spp, **opts), spp=spp)
-              for s in range(n_seeds)]
-    pilot = render(make("pt", scene, seed=pilot_seed, spp_per_pass=pilot_spp // 4), spp=pilot_spp)
+    frames = []
+    for s in range(n_seeds):
+        integ = make(integrator, scene, seed=seed0 + s, spp_per_pass=spp, threads=threads)
+        if broken:
+            integ.broken = broken
+        frames.append(render(integ, spp=spp))
+    pilot = render(make("pt", scene, seed=pilot_seed, spp_per_pass=pilot_spp // 4, threads=threads),
+                   spp=pilot_spp)
     return check(frames, pilot, "primal_base" if integrator == "gpt" else "primal")

@@ -230,10 +230,17 @@ class _Index:
         return self.ids[k]
 
 
-def _emitter_row(em, bs) -> np.ndarray:
+def _new_emitter_row(bs) -> np.ndarray:
+    """An empty emitter row holding the scene's bounding sphere ``bs`` (centre, radius): the shadow
+    rays to emitters at infinity need both (``lights.infinite_distance``)."""
     row = np.zeros(li.EM_WIDTH)
     row[li.EM_BS_R] = bs[3]
     row[li.EM_BS_C:li.EM_BS_C + 3] = bs[:3]
+    return row
+
+
+def _emitter_row(em, bs) -> np.ndarray:
+    row = _new_emitter_row(bs)
     m = np.asarray(em.to_world, dtype=np.float64)
     if em.type == "point":
         row[li.EM_TYPE] = li.E_POINT
@@ -298,12 +305,10 @@ def compile_scene(scene: Scene, plan=None) -> SceneArrays:
     for em, si in enumerate(shape_of_emitter):
         idx = np.nonzero(info[:, g.INFO_EMITTER] == em)[0]
         a = areas[idx]
-        row = np.zeros(li.EM_WIDTH)
+        row = _new_emitter_row(bs)
         row[li.EM_TYPE] = li.E_AREA
         row[li.EM_RGB:li.EM_RGB + 3] = scene.shapes[si].emitter.radiance
         row[li.EM_FIRST], row[li.EM_COUNT], row[li.EM_AREA] = len(em_prims), len(idx), a.sum()
-        row[li.EM_BS_R] = bs[3]
-        row[li.EM_BS_C:li.EM_BS_C + 3] = bs[:3]
         em_rows.append(row)
         em_prims.extend(idx.tolist())
         cdf = np.cumsum(a) / a.sum()
