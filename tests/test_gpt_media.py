@@ -14,8 +14,9 @@ combined with ``combine_gradients(out[1:5], (1, 1))``: the MIS weights are insid
 """
 import numpy as np
 import pytest
-from scipy import stats
 
+from gdlearn.crosscheck import gradients as G
+from gdlearn.crosscheck.gradients import block_t, omnibus
 from gdlearn.integrators import make, render
 from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_MIS, BROKEN_PRIMAL
 from gdlearn.integrators.path.gpt import select_kernel
@@ -28,8 +29,6 @@ ROOT = __file__.rsplit("/tests/", 1)[0]
 RES = 12
 N_SEEDS = 32
 SPP = 8
-BLOCK = 2
-FAMILY_ALPHA = 1e-3
 PILOT_SPP = 256
 #: as tests/test_gpt.py: t^2 with 31 dof has mean 1.07 and variance 2.5; over the 60 blocks of a
 #: 12x12 image the mean has sd 0.2 if blocks were independent, 0.4 with a 4x variance inflation for
@@ -83,27 +82,6 @@ def differences(p, gx, gy):
     return gx[:, :, :-1] - (p[:, :, 1:] - p[:, :, :-1]), gy[:, :-1, :] - (p[:, 1:, :] - p[:, :-1, :])
 
 
-def _blocks(a):
-    a = a.mean(axis=-1)
-    a = np.add.reduceat(a, np.arange(0, a.shape[1], BLOCK), axis=1)
-    return np.add.reduceat(a, np.arange(0, a.shape[2], BLOCK), axis=2)
-
-
-def _t(samples):
-    se = samples.std(axis=0, ddof=1) / np.sqrt(len(samples))
-    return np.abs(samples.mean(axis=0)) / np.maximum(se, 1e-300)
-
-
-def block_t(dx, dy):
-    tx, ty = _t(_blocks(dx)), _t(_blocks(dy))
-    k = stats.t.isf(FAMILY_ALPHA / (2 * (tx.size + ty.size)), df=len(dx) - 1)
-    return tx, ty, k
-
-
-def omnibus(tx, ty):
-    return float(np.mean(np.concatenate([tx.ravel(), ty.ravel()]) ** 2))
-
-
 _PILOT = {}
 
 
@@ -111,15 +89,7 @@ def projected_t(dx, dy, name="fog-box"):
     """Matched filter on an independent pt pilot's gradients (seed 7, not among the test seeds)."""
     if name not in _PILOT:
         _PILOT[name] = render(make("pt", _scene(name), seed=7, spp_per_pass=PILOT_SPP // 4), spp=PILOT_SPP)
-    pilot = _PILOT[name]
-    p, v = pilot.primal.mean(axis=-1), pilot.variance().mean(axis=-1)
-    vx, vy = v[:, 1:] + v[:, :-1], v[1:, :] + v[:-1, :]
-    reg = np.median(np.concatenate([vx.ravel(), vy.ravel()]))
-    px, py = (p[:, 1:] - p[:, :-1]) / (vx + reg), (p[1:, :] - p[:-1, :]) / (vy + reg)
-    sx = (dx.mean(axis=-1) * px).sum(axis=(1, 2))
-    sy = (dy.mean(axis=-1) * py).sum(axis=(1, 2))
-    k = stats.t.isf(FAMILY_ALPHA / (2 * 3), df=len(dx) - 1)
-    return float(_t(sx)), float(_t(sy)), float(_t(sx + sy)), k
+    return G.projected_t(dx, dy, _PILOT[name])
 
 
 @pytest.mark.parametrize("name,policy", [("fog-box", p) for p in POLICIES] +
