@@ -16,6 +16,8 @@ REGISTRY = {
     "gpt": "gdlearn.integrators.path.gpt:GradientPathTracer",
     "sppm": "gdlearn.integrators.photon.sppm:SPPM",
     "ppm": "gdlearn.integrators.photon.sppm:PPM",
+    "vpm": "gdlearn.integrators.photon.volumetric:VPM",
+    "bre": "gdlearn.integrators.photon.volumetric:BRE",
 }
 
 
