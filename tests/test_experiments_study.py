@@ -80,6 +80,12 @@ def test_method_specs_and_executor_names():
     m = S.Method.parse("gpt+l1")
     assert (m.label, m.estimator, m.solver) == ("gpt+l1", "gpt", "l1")
     assert S.Method.parse("gpt", solver="l2").label == "gpt+l2"
+    # integrator options ride in the spec; numbers become numbers, module:Class keeps its colon
+    m = S.Method.parse("bre:kernel=2d:neighbors=16:alpha=0.9")
+    assert (m.label, m.estimator) == ("bre:kernel=2d:neighbors=16:alpha=0.9", "bre")
+    assert m.options == (("kernel", "2d"), ("neighbors", 16), ("alpha", 0.9))
+    m = S.Method.parse("gdlearn.teaching.toy:ToyGradient:seed_offset=3+l1")
+    assert (m.estimator, m.solver, m.options) == ("gdlearn.teaching.toy:ToyGradient", "l1", (("seed_offset", 3),))
     assert isinstance(get_executor("serial"), SerialExecutor)
     assert get_executor("local:3").max_workers == 3
     with pytest.raises(ValueError, match="unknown executor"):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("scene", help="scene file, or toy[:WxH]")
     p.add_argument("--methods", required=True,
                    help="comma-separated estimators: registry names (pt, gpt, ...), name+solver "
-                        "(gpt+l2) or module:Class")
+                        "(gpt+l2), module:Class, with integrator options as :key=value (bre:kernel=2d)")
     budget = p.add_mutually_exclusive_group(required=True)
     budget.add_argument("--time", type=float, metavar="SECONDS", help="equal-time budget per run")
     budget.add_argument("--passes", type=int, help="equal-sample budget: passes per run")
@@ -97,9 +98,8 @@ def run(args) -> int:
     scene = _toy(args.scene) if is_toy else st.SceneFile(args.scene, _defines(args.define))
     methods = []
     for spec in (m.strip() for m in args.methods.split(",") if m.strip()):
-        est, _, sol = spec.partition("+")
-        methods.append(st.Method(spec if sol or not args.solver else f"{spec}+{args.solver}",
-                                 TOY_METHODS.get(est, est), sol or args.solver))
+        m = st.Method.parse(spec, args.solver)
+        methods.append(replace(m, estimator=TOY_METHODS.get(m.estimator, m.estimator)))
     ref = _reference(args, scene, is_toy)
     print(f"reference: {ref.estimator}, spp {ref.spp}, noise floor relMSE {ref.floor:.3g}",
           file=sys.stderr)

@@ -19,8 +19,14 @@ import time
 SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
                  "halfvector+replay+reconnection")
 
-#: integrators that take --photons, --alpha, --radius and --direct
-PHOTON_INTEGRATORS = ("sppm", "ppm")
+#: integrators that take --photons, --alpha and --radius
+PHOTON_INTEGRATORS = ("sppm", "ppm", "vpm", "bre")
+#: option -> (keyword, the integrators it applies to)
+PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alpha": ("alpha", PHOTON_INTEGRATORS),
+                  "--radius": ("radius", PHOTON_INTEGRATORS), "--direct": ("direct", ("sppm", "ppm")),
+                  "--volume-radius": ("volume_radius", ("vpm", "bre")), "--neighbors": ("neighbors", ("vpm", "bre")),
+                  "--transport": ("transport", ("vpm", "bre")), "--samples": ("samples", ("vpm",)),
+                  "--kernel": ("kernel", ("bre",)), "--radii": ("radii", ("bre",))}
 
 
 def add_parser(subparsers) -> None:
@@ -45,14 +51,29 @@ def add_parser(subparsers) -> None:
                    help="gpt only: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
                         "manifold exploration where the effects plan renders caustics through specular chains the "
                         "walk can move, else halfvector+replay+reconnection)")
-    # photon estimators (sppm, ppm); a pass takes 2 camera samples per pixel, so --spp counts passes too
+    # photon estimators (sppm, ppm, vpm, bre); a pass takes 2 camera samples per pixel, so --spp counts passes too
     p.add_argument("--photons", type=int, default=None, metavar="N",
-                   help="sppm/ppm: light paths emitted per pass (default 100000)")
-    p.add_argument("--alpha", type=float, default=None, help="sppm/ppm: radius reduction alpha (default 0.7)")
+                   help="sppm/ppm/vpm/bre: light paths emitted per pass (default 100000)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="sppm/ppm/vpm/bre: radius reduction alpha (default 0.7)")
     p.add_argument("--radius", type=float, default=None, metavar="R",
-                   help="sppm/ppm: initial radius in scene units (default: the pixel footprint)")
+                   help="sppm/ppm/vpm/bre: initial surface radius in scene units (default: the pixel footprint)")
     p.add_argument("--direct", choices=("photons", "nee"), default=None,
                    help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
+    p.add_argument("--volume-radius", type=float, default=None, metavar="R",
+                   help="vpm/bre: initial volume kernel radius in scene units (default: the median distance to "
+                        "the --neighbors-th nearest volume photon)")
+    p.add_argument("--neighbors", type=int, default=None, metavar="N",
+                   help="vpm/bre: photons per kernel that set the default volume radius, and bre's k-NN / "
+                        "variable-kernel n (default 32)")
+    p.add_argument("--transport", choices=("all", "media"), default=None,
+                   help="vpm/bre: the full image (default) or only light transport ending in the medium")
+    p.add_argument("--samples", type=int, default=None, metavar="K",
+                   help="vpm: distance samples per camera path (default 8)")
+    p.add_argument("--kernel", choices=("2d", "3d"), default=None,
+                   help="bre: a biweight disc facing the ray (2d) or a uniform ball (3d, the default)")
+    p.add_argument("--radii", choices=("fixed", "knn", "variable"), default=None,
+                   help="bre: photon radii fixed (default), k-NN, or variable kernels (Jarosz et al. 2008)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -92,15 +113,15 @@ def run(args) -> int:
             print(f"gdlearn render: --shift applies to --integrator gpt, not {args.integrator}", file=sys.stderr)
             return 2
         opts["shift"] = args.shift
-    photon_opts = {"photons_per_pass": args.photons, "alpha": args.alpha, "radius": args.radius,
-                   "direct": args.direct}
-    photon_opts = {k: v for k, v in photon_opts.items() if v is not None}
-    if photon_opts:
-        if args.integrator not in PHOTON_INTEGRATORS:
-            print(f"gdlearn render: --photons/--alpha/--radius/--direct apply to --integrator "
-                  f"{'/'.join(PHOTON_INTEGRATORS)}, not {args.integrator}", file=sys.stderr)
+    for flag, (key, owners) in PHOTON_OPTIONS.items():
+        value = getattr(args, flag[2:].replace("-", "_"))
+        if value is None:
+            continue
+        if args.integrator not in owners:
+            print(f"gdlearn render: {flag} applies to --integrator {'/'.join(owners)}, not {args.integrator}",
+                  file=sys.stderr)
             return 2
-        opts.update(photon_opts)
+        opts[key] = value
     try:
         integ = make(args.integrator, scene, **opts)
     except EffectsError as err:

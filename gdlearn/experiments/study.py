@@ -34,14 +34,30 @@ class Method:
 
     @classmethod
     def parse(cls, spec, solver=None) -> "Method":
-        """``"pt"``, ``"gpt+l1"`` (estimator + solver) or a Method; ``solver`` is the default solver
-        for specs that name none (it applies only to estimators that produce gradients)."""
+        """``"pt"``, ``"gpt+l1"`` (estimator + solver), ``"bre:kernel=2d:radii=variable"``
+        (integrator options as ``:key=value``; numbers are read as numbers) or a Method; ``solver``
+        is the default solver for specs that name none (it applies only to estimators that produce
+        gradients)."""
         if isinstance(spec, Method):
             return spec
         if isinstance(spec, str):
             est, _, sol = spec.partition("+")
-            return cls(spec if sol else (f"{est}+{solver}" if solver else est), est, sol or solver)
+            parts = est.split(":")
+            name = ":".join(p for p in parts if "=" not in p)
+            options = tuple(_option(p) for p in parts if "=" in p)
+            return cls(spec if sol else (f"{est}+{solver}" if solver else est), name, sol or solver, options)
         return cls(getattr(spec, "name", str(spec)), spec, solver)
+
+
+def _option(item: str) -> tuple:
+    """``"key=value"`` -> (key, value), the value as an int or float where it reads as one."""
+    key, _, value = item.partition("=")
+    for kind in (int, float):
+        try:
+            return key, kind(value)
+        except ValueError:
+            pass
+    return key, value
 
 
 @dataclass
