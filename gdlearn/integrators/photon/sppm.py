@@ -19,8 +19,8 @@ Sec. 1.5): the radius is a global schedule, ``r_i^2 = r_1^2 prod_{k=1}^{i-1} (k 
 each pass is an independent estimate at r_i, and the frame is the mean of the passes (no per-pixel
 state). The name says what it is: progressive photon mapping in the probabilistic, memoryless form.
 
-Both: surface scenes only (a scene with media is refused, naming the volumetric estimators to
-come); alpha 0.7 by default (the reference code's and Gruson et al. 2018's; PHOTONS.md Appendix A); the initial
+Both: surface scenes only (a scene with media is refused, naming the volumetric estimators
+``vpm`` and ``bre`` of :mod:`gdlearn.integrators.photon.volumetric`); alpha 0.7 by default (the reference code's and Gruson et al. 2018's; PHOTONS.md Appendix A); the initial
 radius is the pixel footprint at each pixel's gather point (PHOTONS.md Sec. 1.6), from camera paths
 of a sample index no pass uses (so the radius is independent of every estimate), times
 ``radius_scale`` -- or ``radius`` in scene units for every pixel. Each pass emits
@@ -84,7 +84,7 @@ def ppm_radius2_factor(i: int, alpha: float) -> float:
 def _refuse(setup: SceneSetup) -> None:
     if setup.media:
         raise ValueError("sppm / ppm render surfaces only and this scene has participating media; fix: use "
-                         "pt, or the volumetric photon estimators (vpm, bre, beams, planes) once they exist")
+                         "--integrator vpm or bre (the volumetric photon estimators), or pt")
     if setup.has_null:
         raise ValueError("sppm / ppm: a 'null' BSDF only bounds media, which these estimators do not trace; "
                          "fix: remove the null shape or render with pt")
