@@ -128,6 +128,7 @@ def truth(o, d, s, r, kernel, sigma=SIGMA_CAM, g=G_HG):
 BEAMS = {"parallel": ((-0.6, 0.1, 1.0), (1.0, 0.0, 0.0), 1.2),
          "oblique": ((-0.5, -0.4, 1.6), (0.6, 0.5, -0.7), 0.9)}
 N_PATHS, SETS = 160_000, 48
+KD, KV = np.empty(1), np.empty(1, dtype=np.int64)     # k-NN scratch (unused at knn = 0)
 
 
 def _estimates(beam, r, method, k_vpm=16, sigma=SIGMA_CAM, g=G_HG, window=((-HALF, HALF), (-HALF, HALF))):
@@ -140,7 +141,7 @@ def _estimates(beam, r, method, k_vpm=16, sigma=SIGMA_CAM, g=G_HG, window=((-HAL
         h = np.uint64(path_state(7, k, 0))
         if method == "vpm":
             g = G.build(lp.pos, r)
-            a, _ = vpm_beam(media, lp, g, PRM, h, beams, bstate, 1, r, k_vpm)
+            a, _ = vpm_beam(media, lp, g, PRM, h, beams, bstate, 1, r, k_vpm, 0, KD, KV)
             vals.append(np.array(a) / (4 / 3 * math.pi * r ** 3) / N_PATHS)
         else:
             radius = np.full(len(lp), r)
@@ -219,3 +220,37 @@ def test_photons_on_the_kernel_boundary_weigh_nothing():
     for kernel in (KERNEL_2D, KERNEL_3D):
         a, n = bre_beam(_media(), lp, tree, radius, PRM, np.uint64(1), beams, bstate, 0, kernel, buf)
         assert np.all(np.isfinite(a)) and np.all(np.abs(a) < 1e-5), (kernel, a)
+
+
+def test_knn_search_equals_brute_force():
+    """VPM's k-NN radius (Jarosz et al. 2008, Eq. 4 with k nearest): the grid search returns exactly
+    the k nearest photons of a brute-force sort and the distance to the k-th, at points inside the
+    cloud (cell much smaller and much larger than r_k) and outside it, where fewer than k lie within
+    the cap and the cap is the radius."""
+    from gdlearn.integrators.photon.volume_estimates import knn_point
+    lp = _photons(77, 20_000)
+    rng = np.random.default_rng(3)
+    d_cam = (0.6, 0.0, 0.8)
+    for cell, k in ((0.02, 16), (0.3, 16), (0.05, 1), (0.05, 40)):
+        grid = G.build(lp.pos, cell)
+        kd, kv = np.empty(k), np.empty(k, dtype=np.int64)
+        for x in [tuple(rng.uniform([-0.8, -0.8, 0.2], [0.8, 0.8, 1.9])) for _ in range(20)]:
+            phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, k, 10.0, 0, pc_init(), kd, kv)
+            dist = np.linalg.norm(lp.pos - np.array(x), axis=1)
+            near = np.argsort(dist)[:k]
+            assert n == k and set(kv[:n]) == set(near), (cell, k, x)
+            assert abs(rk - dist[near[-1]]) < 1e-12
+            rho = np.array([_rho_hg(d_cam, lp.d_in[v]) for v in near])
+            np.testing.assert_allclose(phi, rho @ lp.beta[near], rtol=1e-12)
+    grid = G.build(lp.pos, 0.05)
+    kd, kv = np.empty(16), np.empty(16, dtype=np.int64)
+    x = (0.0, 0.0, Z + 0.2)                  # above the slab: the nearest photons are >= 0.2 away
+    phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, 16, 0.21, 0, pc_init(), kd, kv)
+    dist = np.linalg.norm(lp.pos - np.array(x), axis=1)
+    assert n == int((dist < 0.21).sum()) < 16 and rk == 0.21
+
+
+def _rho_hg(d_cam, d_in, g=G_HG):
+    """Mitsuba's HG with wi = -d_cam, wo = -d_in (the module docstring of volume_estimates)."""
+    c = float(np.dot(d_cam, d_in))
+    return (1 - g ** 2) / (4 * math.pi * (1 + g ** 2 + 2 * g * c) ** 1.5)

@@ -48,6 +48,8 @@ def test_options_are_refused_where_they_do_not_apply(tmp_path):
         assert r.returncode == 2 and flag in r.stderr and integrator in r.stderr, (integrator, flag, r.stderr)
     r = _cli("render", FOG, "--integrator", "bre", "--neighbors", "0", "--set", "res=8", "--out", out)
     assert r.returncode == 2 and "neighbors=0" in r.stderr
+    r = _cli("render", FOG, "--integrator", "vpm", "--radii", "variable", "--set", "res=8", "--out", out)
+    assert r.returncode == 2 and "vpm takes fixed" in r.stderr and "knn" in r.stderr
 
 
 def test_a_scene_without_media_is_refused_naming_sppm(tmp_path):

@@ -26,7 +26,7 @@ PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alph
                   "--radius": ("radius", PHOTON_INTEGRATORS), "--direct": ("direct", ("sppm", "ppm")),
                   "--volume-radius": ("volume_radius", ("vpm", "bre")), "--neighbors": ("neighbors", ("vpm", "bre")),
                   "--transport": ("transport", ("vpm", "bre")), "--samples": ("samples", ("vpm",)),
-                  "--kernel": ("kernel", ("bre",)), "--radii": ("radii", ("bre",))}
+                  "--kernel": ("kernel", ("bre",)), "--radii": ("radii", ("vpm", "bre"))}
 
 
 def add_parser(subparsers) -> None:
@@ -64,8 +64,8 @@ def add_parser(subparsers) -> None:
                    help="vpm/bre: initial volume kernel radius in scene units (default: the median distance to "
                         "the --neighbors-th nearest volume photon)")
     p.add_argument("--neighbors", type=int, default=None, metavar="N",
-                   help="vpm/bre: photons per kernel that set the default volume radius, and bre's k-NN / "
-                        "variable-kernel n (default 32)")
+                   help="vpm/bre: photons per kernel that set the default volume radius, and the k of "
+                        "k-NN and variable radii (default 32)")
     p.add_argument("--transport", choices=("all", "media"), default=None,
                    help="vpm/bre: the full image (default) or only light transport ending in the medium")
     p.add_argument("--samples", type=int, default=None, metavar="K",
@@ -73,7 +73,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--kernel", choices=("2d", "3d"), default=None,
                    help="bre: a biweight disc facing the ray (2d) or a uniform ball (3d, the default)")
     p.add_argument("--radii", choices=("fixed", "knn", "variable"), default=None,
-                   help="bre: photon radii fixed (default), k-NN, or variable kernels (Jarosz et al. 2008)")
+                   help="bre: photon radii fixed (default), k-NN, or variable kernels (Jarosz et al. 2008); "
+                        "vpm: progressive per-pixel radii (fixed, the default) or a k-NN radius at each sample")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -19,7 +19,9 @@ when the effects plan wants the merged path's class.
   t ~ sigma e^(-sigma t) / (1 - e^(-sigma s)) (the truncated exponential, stratified: u = (k + xi) / K),
   each gathering the photons in a ball of radius r (uniform kernel 3 / (4 pi r^3)). With K
   samples this is the exponentially stepped ray march of Jarosz's Eq. 3 with a random offset, an
-  unbiased estimate of the blurred integral at any K.
+  unbiased estimate of the blurred integral at any K. With ``knn`` the radius at each sample is
+  the distance to its k-th nearest photon (:func:`knn_point`): Jarosz's conventional estimate,
+  biased at any photon count unless k grows with it, and the only one whose blur adapts to the density.
 * :func:`bre_beam` -- the beam radiance estimate (Jarosz et al. 2008, Eq. 18-21): every photon
   whose disc (2D) or ball (3D) the beam crosses, found by the bounding-box hierarchy
   (:mod:`gdlearn.photons.bbh`), with its own radius r_i:
@@ -123,6 +125,63 @@ def vpm_point(lp, grid, prm, x, d_cam, medium, g, r, m, state):
 
 
 @block
+def _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv):
+    """The (at most) knn nearest admitted photons strictly within r of x, sorted: squared distances
+    in kd[:n], rows in kv[:n]; returns n."""
+    n = 0
+    r2 = r * r
+    for ix in range(cell_of(x[0] - r, grid.inv_h), cell_of(x[0] + r, grid.inv_h) + 1):
+        for iy in range(cell_of(x[1] - r, grid.inv_h), cell_of(x[1] + r, grid.inv_h) + 1):
+            for iz in range(cell_of(x[2] - r, grid.inv_h), cell_of(x[2] + r, grid.inv_h) + 1):
+                bk = bucket(ix, iy, iz, grid.mask)
+                for k in range(grid.start[bk], grid.start[bk + 1]):
+                    if grid.cell[k, 0] != ix or grid.cell[k, 1] != iy or grid.cell[k, 2] != iz:
+                        continue
+                    dx = grid.pos[k, 0] - x[0]
+                    dy = grid.pos[k, 1] - x[1]
+                    dz = grid.pos[k, 2] - x[2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 >= r2 or (n == knn and d2 >= kd[n - 1]):
+                        continue
+                    v = grid.order[k]
+                    if not _admit(lp, v, prm, medium, m, state):
+                        continue
+                    j = n if n < knn else knn - 1     # insertion into the sorted list, the largest drops out
+                    while j > 0 and kd[j - 1] > d2:
+                        kd[j] = kd[j - 1]
+                        kv[j] = kv[j - 1]
+                        j -= 1
+                    kd[j] = d2
+                    kv[j] = v
+                    n = min(n + 1, knn)
+    return n
+
+
+@block
+def knn_point(lp, grid, prm, x, d_cam, medium, g, knn, rmax, m, state, kd, kv):
+    """(sum of rho beta over the knn nearest photons, their count, the radius r_k): Jarosz et al.
+    2008, Eq. 4 with the k-nearest-neighbour radius, the distance to the knn-th photon (all knn
+    photons counted), or rmax where fewer lie within rmax. The search grows from one grid cell,
+    doubling: once knn photons lie within r, they are the knn nearest."""
+    r = min(rmax, 1.0 / grid.inv_h)
+    n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv)
+    while n < knn and r < rmax:
+        r = min(2.0 * r, rmax)
+        n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv)
+    rk = math.sqrt(kd[n - 1]) if n == knn else rmax
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    for i in range(n):
+        v = kv[i]
+        ph = hg_eval(g, d_cam[0] * lp.d_in[v, 0] + d_cam[1] * lp.d_in[v, 1] + d_cam[2] * lp.d_in[v, 2])
+        a0 += ph * lp.beta[v, 0]
+        a1 += ph * lp.beta[v, 1]
+        a2 += ph * lp.beta[v, 2]
+    return (a0, a1, a2), n, rk
+
+
+@block
 def _pick_beam(beams, nb, u):
     """A beam with probability proportional to the max component of its camera weight; (b, P(b))."""
     tot = 0.0
@@ -140,10 +199,12 @@ def _pick_beam(beams, nb, u):
 
 
 @block
-def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K):
+def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv):
     """VPM along the camera path's beams (module docstring): (camera weight x T / pdf x
     sum rho beta averaged over the K samples -- the kernel's 1 / V(r) left to the caller, photon count).
-    ``media`` holds the medium rows (``sa.media``), ``beams`` / ``bstate`` the path's nb beams."""
+    ``media`` holds the medium rows (``sa.media``), ``beams`` / ``bstate`` the path's nb beams.
+    ``knn`` > 0: each sample's radius is its k-NN radius (:func:`knn_point`, at most r; kd, kv its
+    scratch of knn entries) and the sum carries its own 1 / V(r_k)."""
     a = (0.0, 0.0, 0.0)
     cnt = 0
     for k in range(K):
@@ -162,7 +223,12 @@ def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K):
         o = (beams[b, BEAM_O], beams[b, BEAM_O + 1], beams[b, BEAM_O + 2])
         d = (beams[b, BEAM_D], beams[b, BEAM_D + 1], beams[b, BEAM_D + 2])
         x = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
-        phi, c = vpm_point(lp, grid, prm, x, d, med, g, r, int(bstate[b, 1]), bstate[b, 0])
+        if knn > 0:
+            phi, c, rk = knn_point(lp, grid, prm, x, d, med, g, knn, r, int(bstate[b, 1]), bstate[b, 0], kd, kv)
+            iv = 1.0 / ball_volume(rk)
+            phi = (phi[0] * iv, phi[1] * iv, phi[2] * iv)
+        else:
+            phi, c = vpm_point(lp, grid, prm, x, d, med, g, r, int(bstate[b, 1]), bstate[b, 0])
         cnt += c
         tr = transmittance(sig, t)
         k0 = 1.0 / (pdf * pb * K)

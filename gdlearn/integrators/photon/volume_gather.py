@@ -46,6 +46,7 @@ class VolumeParams(NamedTuple):
     method: int           # VPM, BRE2D or BRE3D
     samples: int          # VPM: distance samples per camera path
     surfaces: bool        # also the surface gather and the emission (False: --transport media)
+    knn: int              # VPM: k-NN radius at each distance sample, capped at the pixel's radius (0: that radius)
 
 
 class VolumeOut(NamedTuple):
@@ -54,7 +55,7 @@ class VolumeOut(NamedTuple):
     le: np.ndarray        # (2, H, W, 3): emission seen through the specular chain
     foot: np.ndarray      # (2, H, W): pixel footprint at the gather point (0: none)
     bad: np.ndarray       # (H,): non-finite terms dropped
-    phiv: np.ndarray      # (2, H, W, 3): medium estimate (VPM: without 1 / V(r))
+    phiv: np.ndarray      # (2, H, W, 3): medium estimate (VPM with a fixed radius: without 1 / V(r))
     mv: np.ndarray        # (2, H, W): volume photons found
     probe: np.ndarray     # (2, H, W, 3): a point on the first beam at a free-flight distance (NaN: no beam)
 
@@ -99,6 +100,8 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
     beams = np.empty((MAX_BEAMS, BEAM_COLS))
     bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
     buf = np.empty(max(1, max(bbhs[0].order.shape[0], bbhs[1].order.shape[0])), dtype=np.int64)
+    kd = np.empty(max(1, vprm.knn))
+    kv = np.empty(max(1, vprm.knn), dtype=np.int64)
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -127,7 +130,7 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
                 continue
             _probe(sa.media, beams, rand_at(h, D_PROBE), out.probe, hh, y, x)
             a, cnt = _medium(sa, lp, vgrids[hh], bbhs[hh], radius, gprm, vprm, h, beams, bstate, nb, r_vol[y, x],
-                             buf)
+                             buf, kd, kv)
             if np.isfinite(a[0]) and np.isfinite(a[1]) and np.isfinite(a[2]):
                 for c in range(3):
                     out.phiv[hh, y, x, c] = a[c]
@@ -138,11 +141,11 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
 
 
 @block
-def _medium(sa, lp, vgrid, bbh, radius, gprm, vprm, h, beams, bstate, nb, r, buf):
+def _medium(sa, lp, vgrid, bbh, radius, gprm, vprm, h, beams, bstate, nb, r, buf, kd, kv):
     if vprm.method == VPM:
         if not r > 0.0:
             return (0.0, 0.0, 0.0), 0
-        return vpm_beam(sa.media, lp, vgrid, gprm, h, beams, bstate, nb, r, vprm.samples)
+        return vpm_beam(sa.media, lp, vgrid, gprm, h, beams, bstate, nb, r, vprm.samples, vprm.knn, kd, kv)
     a = (0.0, 0.0, 0.0)
     cnt = 0
     for b in range(nb):

@@ -102,7 +102,7 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
                                         any(mask >> c & 1 for c in _CLASSES if c != CAUSTICS), want_volume=True)
         self.gather_params = GatherParams(int(min(md, UNBOUNDED)), s.threshold, mask,
                                           not all(mask >> c & 1 for c in _CLASSES), False)
-        self.vparams = vg.VolumeParams(self.method, int(samples), surfaces)
+        self.vparams = vg.VolumeParams(self.method, int(samples), surfaces, self._knn())
         self.tracer = LightTracer(s.sa, self.trace_params, threads=threads)
         self.width, self.height = s.width, s.height
         self.r_min = R_MIN * float(s.sa.bsphere[3])
@@ -110,6 +110,10 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
         self.rv0 = None           # volume: the initial radius (scene units)
 
     # -- radii --------------------------------------------------------------------------------------
+    def _knn(self) -> int:
+        """k of a k-NN radius at each VPM distance sample (0: the pixel's progressive radius)."""
+        return 0
+
     def _run(self, lp, sgrids, vgrids, bbhs, radius, sample0, r_surf, r_vol) -> vg.VolumeOut:
         out = vg.new_out(self.height, self.width)
         with self.setup.parallel(self.height):
@@ -238,15 +242,31 @@ def _result(est, emission, stats) -> PassResult:
 
 
 class VPM(VolumetricPhotonMapper):
-    """Progressive volumetric photon mapping (module docstring): per-pixel statistics, surface and volume."""
+    """Progressive volumetric photon mapping (module docstring): per-pixel statistics, surface and
+    volume. ``radii="knn"``: Jarosz et al. 2008's conventional estimate instead, the radius at each
+    distance sample the distance to its ``neighbors``-th nearest photon (at most KNN_CAP x the
+    initial volume radius), the frame the mean of the passes; biased at every photon count."""
 
     name = "vpm"
     method = vg.VPM
+    RADII = ("fixed", "knn")
+    #: how far the k-NN search may reach, in initial volume radii (a sample with fewer photons
+    #: within that distance counts those it found in a ball of this radius)
+    KNN_CAP = 4.0
+
+    def __init__(self, scene, *, radii: str = "fixed", **options):
+        if radii not in self.RADII:
+            raise ValueError(f"radii={radii!r}: vpm takes fixed (progressive per-pixel radii) or knn")
+        self.radii = radii
+        super().__init__(scene, **options)
+
+    def _knn(self) -> int:
+        return self.neighbors if self.radii == "knn" else 0
 
     def build(self, lp):
         vsel = self._halves(lp, self._volume_rows(lp))
         rv = getattr(self, "rv", None)
-        cell = float(np.percentile(rv, 90)) if rv is not None else self.rv0
+        cell = float(np.percentile(rv, 90)) if rv is not None and not self._knn() else self.rv0
         self._nvol = sum(s.size for s in vsel)
         b = bbh_mod.build(np.zeros((0, 3)), np.zeros(0))
         return lp, self._surface_grids(lp), tuple(_grid(lp.pos, s, max(cell, self.r_min)) for s in vsel), (b, b)
@@ -256,11 +276,11 @@ class VPM(VolumetricPhotonMapper):
         h, w = self.height, self.width
         if pass_index == 0:
             self.N, self.Nv = np.zeros((h, w)), np.zeros((h, w))
-            self.rv = np.full((h, w), self.rv0)
+            self.rv = np.full((h, w), self.rv0 * (self.KNN_CAP if self._knn() else 1.0))
             self.D, self.Dv, self.E = np.zeros((2, h, w, 3)), np.zeros((2, h, w, 3)), np.zeros((2, h, w, 3))
         out = self._run(lp, sg, vgr, bb, np.zeros(1), 2 * pass_index, np.sqrt(self.r2), self.rv)
         accumulate_density(self.D, out.phi, np.broadcast_to(self.r2, (2, h, w)))
-        vol = 4.0 / 3.0 * math.pi * self.rv ** 3
+        vol = np.ones_like(self.rv) if self._knn() else 4.0 / 3.0 * math.pi * self.rv ** 3   # k-NN: in phiv
         self.Dv += out.phiv / vol[None, :, :, None]
         self.E += out.le
         self._m, self._mv = out.m.sum(axis=0), out.mv.sum(axis=0)
@@ -271,8 +291,9 @@ class VPM(VolumetricPhotonMapper):
 
     def update_radius(self, pass_index: int) -> None:
         self.N, self.r2 = reduce_radius(self.N, self.r2, self._m, self.alpha)
-        self.Nv, rv = reduce_radius3(self.Nv, self.rv, self._mv, self.alpha)
-        self.rv = np.maximum(rv, self.r_min)
+        if not self._knn():
+            self.Nv, rv = reduce_radius3(self.Nv, self.rv, self._mv, self.alpha)
+            self.rv = np.maximum(rv, self.r_min)
 
     def pass_state(self) -> dict:
         return {"alpha": self.alpha, "mean_radius": float(np.sqrt(self.r2).mean()),
