@@ -141,7 +141,7 @@ def _estimates(beam, r, method, k_vpm=16, sigma=SIGMA_CAM, g=G_HG, window=((-HAL
         h = np.uint64(path_state(7, k, 0))
         if method == "vpm":
             g = G.build(lp.pos, r)
-            a, _ = vpm_beam(media, lp, g, PRM, h, beams, bstate, 1, r, k_vpm, 0, KD, KV)
+            a, _ = vpm_beam(media, lp, g, PRM, h, beams, bstate, 1, r, k_vpm, 0, KD, KV, np.empty(len(lp), np.int64))
             vals.append(np.array(a) / (4 / 3 * math.pi * r ** 3) / N_PATHS)
         else:
             radius = np.full(len(lp), r)
@@ -229,13 +229,14 @@ def test_knn_search_equals_brute_force():
     the cap and the cap is the radius."""
     from gdlearn.integrators.photon.volume_estimates import knn_point
     lp = _photons(77, 20_000)
+    buf = np.empty(len(lp), dtype=np.int64)
     rng = np.random.default_rng(3)
     d_cam = (0.6, 0.0, 0.8)
     for cell, k in ((0.02, 16), (0.3, 16), (0.05, 1), (0.05, 40)):
         grid = G.build(lp.pos, cell)
         kd, kv = np.empty(k), np.empty(k, dtype=np.int64)
         for x in [tuple(rng.uniform([-0.8, -0.8, 0.2], [0.8, 0.8, 1.9])) for _ in range(20)]:
-            phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, k, 10.0, 0, pc_init(), kd, kv)
+            phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, k, 10.0, 0, pc_init(), kd, kv, buf)
             dist = np.linalg.norm(lp.pos - np.array(x), axis=1)
             near = np.argsort(dist)[:k]
             assert n == k and set(kv[:n]) == set(near), (cell, k, x)
@@ -245,7 +246,7 @@ def test_knn_search_equals_brute_force():
     grid = G.build(lp.pos, 0.05)
     kd, kv = np.empty(16), np.empty(16, dtype=np.int64)
     x = (0.0, 0.0, Z + 0.2)                  # above the slab: the nearest photons are >= 0.2 away
-    phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, 16, 0.21, 0, pc_init(), kd, kv)
+    phi, n, rk = knn_point(lp, grid, PRM, x, d_cam, 0, G_HG, 16, 0.21, 0, pc_init(), kd, kv, buf)
     dist = np.linalg.norm(lp.pos - np.array(x), axis=1)
     assert n == int((dist < 0.21).sum()) < 16 and rk == 0.21
 

@@ -54,7 +54,7 @@ from gdlearn.kernels.rng import rand_at
 from gdlearn.kernels.vec import dot
 from gdlearn.kernels.jit import block, inlined
 from gdlearn.photons import bbh as bbh_mod
-from gdlearn.photons.grid import bucket, cell_of
+from gdlearn.photons.grid import query as grid_query
 from gdlearn.integrators.photon.camera_beams import BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W
 from gdlearn.integrators.photon.gather import _class_ok
 
@@ -93,81 +93,60 @@ def _admit(lp, v, prm, medium, m, state):
 
 
 @block
-def vpm_point(lp, grid, prm, x, d_cam, medium, g, r, m, state):
+def vpm_point(lp, grid, prm, x, d_cam, medium, g, r, m, state, buf):
     """(sum of rho beta over the photons within r of x, their count): Jarosz et al. 2008, Eq. 4
-    without the kernel's 1 / (4/3 pi r^3)."""
+    without the kernel's 1 / (4/3 pi r^3). ``buf`` holds the grid's candidates (as many as it has points)."""
     a0 = 0.0
     a1 = 0.0
     a2 = 0.0
     cnt = 0
-    r2 = r * r
-    for ix in range(cell_of(x[0] - r, grid.inv_h), cell_of(x[0] + r, grid.inv_h) + 1):
-        for iy in range(cell_of(x[1] - r, grid.inv_h), cell_of(x[1] + r, grid.inv_h) + 1):
-            for iz in range(cell_of(x[2] - r, grid.inv_h), cell_of(x[2] + r, grid.inv_h) + 1):
-                bk = bucket(ix, iy, iz, grid.mask)
-                for k in range(grid.start[bk], grid.start[bk + 1]):
-                    if grid.cell[k, 0] != ix or grid.cell[k, 1] != iy or grid.cell[k, 2] != iz:
-                        continue
-                    dx = grid.pos[k, 0] - x[0]
-                    dy = grid.pos[k, 1] - x[1]
-                    dz = grid.pos[k, 2] - x[2]
-                    if dx * dx + dy * dy + dz * dz >= r2:
-                        continue
-                    v = grid.order[k]
-                    if not _admit(lp, v, prm, medium, m, state):
-                        continue
-                    cnt += 1
-                    ph = hg_eval(g, d_cam[0] * lp.d_in[v, 0] + d_cam[1] * lp.d_in[v, 1] + d_cam[2] * lp.d_in[v, 2])
-                    a0 += ph * lp.beta[v, 0]
-                    a1 += ph * lp.beta[v, 1]
-                    a2 += ph * lp.beta[v, 2]
+    for i in range(min(grid_query(grid, x, r, buf), buf.shape[0])):
+        v = buf[i]
+        if not _admit(lp, v, prm, medium, m, state):
+            continue
+        cnt += 1
+        ph = hg_eval(g, d_cam[0] * lp.d_in[v, 0] + d_cam[1] * lp.d_in[v, 1] + d_cam[2] * lp.d_in[v, 2])
+        a0 += ph * lp.beta[v, 0]
+        a1 += ph * lp.beta[v, 1]
+        a2 += ph * lp.beta[v, 2]
     return (a0, a1, a2), cnt
 
 
 @block
-def _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv):
+def _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv, buf):
     """The (at most) knn nearest admitted photons strictly within r of x, sorted: squared distances
     in kd[:n], rows in kv[:n]; returns n."""
     n = 0
-    r2 = r * r
-    for ix in range(cell_of(x[0] - r, grid.inv_h), cell_of(x[0] + r, grid.inv_h) + 1):
-        for iy in range(cell_of(x[1] - r, grid.inv_h), cell_of(x[1] + r, grid.inv_h) + 1):
-            for iz in range(cell_of(x[2] - r, grid.inv_h), cell_of(x[2] + r, grid.inv_h) + 1):
-                bk = bucket(ix, iy, iz, grid.mask)
-                for k in range(grid.start[bk], grid.start[bk + 1]):
-                    if grid.cell[k, 0] != ix or grid.cell[k, 1] != iy or grid.cell[k, 2] != iz:
-                        continue
-                    dx = grid.pos[k, 0] - x[0]
-                    dy = grid.pos[k, 1] - x[1]
-                    dz = grid.pos[k, 2] - x[2]
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 >= r2 or (n == knn and d2 >= kd[n - 1]):
-                        continue
-                    v = grid.order[k]
-                    if not _admit(lp, v, prm, medium, m, state):
-                        continue
-                    j = n if n < knn else knn - 1     # insertion into the sorted list, the largest drops out
-                    while j > 0 and kd[j - 1] > d2:
-                        kd[j] = kd[j - 1]
-                        kv[j] = kv[j - 1]
-                        j -= 1
-                    kd[j] = d2
-                    kv[j] = v
-                    n = min(n + 1, knn)
+    for i in range(min(grid_query(grid, x, r, buf), buf.shape[0])):
+        v = buf[i]
+        dx = lp.pos[v, 0] - x[0]
+        dy = lp.pos[v, 1] - x[1]
+        dz = lp.pos[v, 2] - x[2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if (n == knn and d2 >= kd[n - 1]) or not _admit(lp, v, prm, medium, m, state):
+            continue
+        j = n if n < knn else knn - 1     # insertion into the sorted list, the largest drops out
+        while j > 0 and kd[j - 1] > d2:
+            kd[j] = kd[j - 1]
+            kv[j] = kv[j - 1]
+            j -= 1
+        kd[j] = d2
+        kv[j] = v
+        n = min(n + 1, knn)
     return n
 
 
 @block
-def knn_point(lp, grid, prm, x, d_cam, medium, g, knn, rmax, m, state, kd, kv):
+def knn_point(lp, grid, prm, x, d_cam, medium, g, knn, rmax, m, state, kd, kv, buf):
     """(sum of rho beta over the knn nearest photons, their count, the radius r_k): Jarosz et al.
     2008, Eq. 4 with the k-nearest-neighbour radius, the distance to the knn-th photon (all knn
     photons counted), or rmax where fewer lie within rmax. The search grows from one grid cell,
     doubling: once knn photons lie within r, they are the knn nearest."""
     r = min(rmax, 1.0 / grid.inv_h)
-    n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv)
+    n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv, buf)
     while n < knn and r < rmax:
         r = min(2.0 * r, rmax)
-        n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv)
+        n = _nearest(lp, grid, prm, x, medium, r, m, state, knn, kd, kv, buf)
     rk = math.sqrt(kd[n - 1]) if n == knn else rmax
     a0 = 0.0
     a1 = 0.0
@@ -199,12 +178,12 @@ def _pick_beam(beams, nb, u):
 
 
 @block
-def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv):
+def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv, buf):
     """VPM along the camera path's beams (module docstring): (camera weight x T / pdf x
     sum rho beta averaged over the K samples -- the kernel's 1 / V(r) left to the caller, photon count).
     ``media`` holds the medium rows (``sa.media``), ``beams`` / ``bstate`` the path's nb beams.
     ``knn`` > 0: each sample's radius is its k-NN radius (:func:`knn_point`, at most r; kd, kv its
-    scratch of knn entries) and the sum carries its own 1 / V(r_k)."""
+    scratch of knn entries) and the sum carries its own 1 / V(r_k). ``buf``: the grid's candidates."""
     a = (0.0, 0.0, 0.0)
     cnt = 0
     for k in range(K):
@@ -224,11 +203,12 @@ def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv):
         d = (beams[b, BEAM_D], beams[b, BEAM_D + 1], beams[b, BEAM_D + 2])
         x = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
         if knn > 0:
-            phi, c, rk = knn_point(lp, grid, prm, x, d, med, g, knn, r, int(bstate[b, 1]), bstate[b, 0], kd, kv)
+            phi, c, rk = knn_point(lp, grid, prm, x, d, med, g, knn, r, int(bstate[b, 1]), bstate[b, 0], kd, kv,
+                                   buf)
             iv = 1.0 / ball_volume(rk)
             phi = (phi[0] * iv, phi[1] * iv, phi[2] * iv)
         else:
-            phi, c = vpm_point(lp, grid, prm, x, d, med, g, r, int(bstate[b, 1]), bstate[b, 0])
+            phi, c = vpm_point(lp, grid, prm, x, d, med, g, r, int(bstate[b, 1]), bstate[b, 0], buf)
         cnt += c
         tr = transmittance(sig, t)
         k0 = 1.0 / (pdf * pb * K)

@@ -99,7 +99,9 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     beams = np.empty((MAX_BEAMS, BEAM_COLS))
     bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
-    buf = np.empty(max(1, max(bbhs[0].order.shape[0], bbhs[1].order.shape[0])), dtype=np.int64)
+    # the candidates of one query: every photon of the larger half at most (BRE: the hierarchies, VPM: the grids)
+    buf = np.empty(max(1, bbhs[0].order.shape[0], bbhs[1].order.shape[0], vgrids[0].order.shape[0],
+                       vgrids[1].order.shape[0]), dtype=np.int64)
     kd = np.empty(max(1, vprm.knn))
     kv = np.empty(max(1, vprm.knn), dtype=np.int64)
     for x in range(w):
@@ -145,7 +147,7 @@ def _medium(sa, lp, vgrid, bbh, radius, gprm, vprm, h, beams, bstate, nb, r, buf
     if vprm.method == VPM:
         if not r > 0.0:
             return (0.0, 0.0, 0.0), 0
-        return vpm_beam(sa.media, lp, vgrid, gprm, h, beams, bstate, nb, r, vprm.samples, vprm.knn, kd, kv)
+        return vpm_beam(sa.media, lp, vgrid, gprm, h, beams, bstate, nb, r, vprm.samples, vprm.knn, kd, kv, buf)
     a = (0.0, 0.0, 0.0)
     cnt = 0
     for b in range(nb):
