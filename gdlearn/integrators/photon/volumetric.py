@@ -44,7 +44,8 @@ import math
 
 import numpy as np
 
-from gdlearn.kernels.pathclass import CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, GLOSSY, SPECULAR
+from gdlearn.kernels.pathclass import (CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, GLOSSY, MULTIPLE_SCATTERING,
+                                      SINGLE_SCATTERING, SPECULAR, VOLUME_CAUSTICS)
 from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons import radii as radii_mod
@@ -63,6 +64,7 @@ from gdlearn.integrators.setup import UNBOUNDED, SceneSetup
 PILOT_PASS = 1 << 40
 TRANSPORT = ("all", "media")
 _CLASSES = (DIRECT_LIGHTING, DIFFUSE_INTERREFLECTION, GLOSSY, SPECULAR, CAUSTICS)
+_MEDIUM_CLASSES = (SINGLE_SCATTERING, MULTIPLE_SCATTERING, VOLUME_CAUSTICS)
 #: the smallest radius, relative to the scene's bounding sphere
 R_MIN = 1e-9
 
@@ -98,10 +100,15 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
         md = s.max_depth if s.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
         mask = s.mask
         surfaces = transport == "all"
-        self.trace_params = TraceParams(max(0, md - 1), s.rr_depth, s.threshold, bool(mask >> CAUSTICS & 1),
-                                        any(mask >> c & 1 for c in _CLASSES if c != CAUSTICS), want_volume=True)
+        # Surface photons after a medium vertex (L M D E, L S M D E) belong to the medium classes, so
+        # these ask for surface photons of both kinds; the merge-time class filter keeps what the plan wants.
+        media_classes = any(mask >> c & 1 for c in _MEDIUM_CLASSES)
+        self.trace_params = TraceParams(max(0, md - 1), s.rr_depth, s.threshold,
+                                        bool(mask >> CAUSTICS & 1) or media_classes,
+                                        any(mask >> c & 1 for c in _CLASSES if c != CAUSTICS) or media_classes,
+                                        want_volume=True)
         self.gather_params = GatherParams(int(min(md, UNBOUNDED)), s.threshold, mask,
-                                          not all(mask >> c & 1 for c in _CLASSES), False)
+                                          not all(mask >> c & 1 for c in _CLASSES + _MEDIUM_CLASSES), False)
         self.vparams = vg.VolumeParams(self.method, int(samples), surfaces, self._knn())
         self.tracer = LightTracer(s.sa, self.trace_params, threads=threads)
         self.width, self.height = s.width, s.height
