@@ -128,3 +128,32 @@ def test_sppm_update_without_the_flux_rescale_is_caught(tmp_path):
     assert any("density form" in line for line in failed), out
     assert any("known density" in line for line in failed), out
     assert not any("radius never shrinks" in line for line in failed), out
+
+
+#: the two classic slips of the BRE exercise: the kernel without its 1 / r^2 (K2 evaluated at d / r
+#: but never divided by the disc's scale), and Silverman's biweight with the 2D Epanechnikov's 2/pi
+_BRE_SOLUTION = (SOLUTIONS_DIR / "bre_kernel.py").read_text()
+BRE_BUGS = {
+    "without the 1/r^2": (_BRE_SOLUTION.replace("/ (r * r) * math.exp", "* math.exp"),
+                          ["one photon by hand", "brute force"], "misses its 1 / r^2"),
+    "with the wrong normalisation": (_BRE_SOLUTION.replace("return 3.0 / math.pi * a * a", "return 2.0 / math.pi * a * a"),
+                                     ["K2(0) = 3/pi", "int_0^1 K2(x) 2 pi x dx = 1", "gdlearn's compiled kernel",
+                                      "one photon by hand", "brute force"], "does not depend on r"),
+}
+
+
+@pytest.mark.parametrize("bug", sorted(BRE_BUGS))
+def test_bre_kernel_with_a_planted_bug_is_caught(tmp_path, bug):
+    """A BRE kernel without the 1/r^2, or with the biweight scaled by 2/pi instead of 3/pi: the checks
+    must fail the tests that see it (the brute-force measurement saying which), and pass the others
+    (the conditions 0 < t < s and d < r are still right)."""
+    source, failing, hint = BRE_BUGS[bug]
+    assert source != _BRE_SOLUTION, "the planted bug no longer matches the solution's text"
+    rc, out = check_exercise_source(tmp_path, "bre-kernel", source)
+    assert rc == 1, out
+    failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
+    for label in failing:
+        assert any(label in line for line in failed), (label, out)
+    assert hint in out, out
+    assert not any("0 unless 0 < t < s" in line for line in failed), out
+    assert len(failed) == len(failing), out

@@ -12,15 +12,15 @@ hierarchy is built in Jarosz's two steps:
 
 Nodes are numbered as the build creates them (children after their parent); a leaf has
 ``left = right = -1`` and owns photons ``start .. start + count`` of the tree order.
-:func:`collect` walks the tree with an explicit stack, tests the segment against the boxes (slab
+``collect`` walks the tree with an explicit stack, tests the segment against the boxes (slab
 test; a zero direction component tests the origin against the slab instead of 0 x inf), and
-decides each photon exactly (:func:`perp`):
+decides each photon exactly (``perp``):
 
 * mode 2 (a disc facing the ray, BRE-2D): d_perp < r and 0 < t_p < tmax;
 * mode 3 (a ball, BRE-3D): d_perp < r and the chord [t_p - D, t_p + D], D = sqrt(r^2 - d_perp^2),
   overlaps (0, tmax).
 
-d_perp^2 is computed from the perpendicular offset q = (c - o) - t_p d, never as |c - o|^2 - t_p^2,
+d_perp^2 is computed from the perpendicular offset q = (c - o) - t_p d, never as ``|c - o|^2 - t_p^2``,
 which cancels catastrophically for photons far from the ray origin.
 """
 from __future__ import annotations

@@ -13,16 +13,16 @@ mix two media's sigma_s; the bias is O(r) at the boundary and vanishes with the 
 merged path fits max_depth (camera surface vertices m, photon depth k: m + 1 + k segments), and
 when the effects plan wants the merged path's class.
 
-* :func:`vpm_beam` -- VPM, the point-point estimate (Jarosz et al. 2008, Eq. 3-4; its progressive
+* ``vpm_beam`` -- VPM, the point-point estimate (Jarosz et al. 2008, Eq. 3-4; its progressive
   form of Gruson et al. 2018, Sec. 6.1 and Eq. 14): K distance samples per camera path, sample k
   on a beam chosen with probability proportional to the beam's camera weight, at distance
   t ~ sigma e^(-sigma t) / (1 - e^(-sigma s)) (the truncated exponential, stratified: u = (k + xi) / K),
   each gathering the photons in a ball of radius r (uniform kernel 3 / (4 pi r^3)). With K
   samples this is the exponentially stepped ray march of Jarosz's Eq. 3 with a random offset, an
   unbiased estimate of the blurred integral at any K. With ``knn`` the radius at each sample is
-  the distance to its k-th nearest photon (:func:`knn_point`): Jarosz's conventional estimate,
+  the distance to its k-th nearest photon (``knn_point``): Jarosz's conventional estimate,
   biased at any photon count unless k grows with it, and the only one whose blur adapts to the density.
-* :func:`bre_beam` -- the beam radiance estimate (Jarosz et al. 2008, Eq. 18-21): every photon
+* ``bre_beam`` -- the beam radiance estimate (Jarosz et al. 2008, Eq. 18-21): every photon
   whose disc (2D) or ball (3D) the beam crosses, found by the bounding-box hierarchy
   (:mod:`gdlearn.photons.bbh`), with its own radius r_i:
 
@@ -182,7 +182,7 @@ def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv, buf)
     """VPM along the camera path's beams (module docstring): (camera weight x T / pdf x
     sum rho beta averaged over the K samples -- the kernel's 1 / V(r) left to the caller, photon count).
     ``media`` holds the medium rows (``sa.media``), ``beams`` / ``bstate`` the path's nb beams.
-    ``knn`` > 0: each sample's radius is its k-NN radius (:func:`knn_point`, at most r; kd, kv its
+    ``knn`` > 0: each sample's radius is its k-NN radius (``knn_point``, at most r; kd, kv its
     scratch of knn entries) and the sum carries its own 1 / V(r_k). ``buf``: the grid's candidates."""
     a = (0.0, 0.0, 0.0)
     cnt = 0

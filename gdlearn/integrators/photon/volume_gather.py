@@ -3,7 +3,7 @@
 A pixel takes two camera samples a pass (sample 2 i + hh, half hh of pass i), as surface photon
 mapping does (:mod:`gdlearn.integrators.photon.sppm`): half hh gathers only the photons of the
 light paths of half hh, so the two halves are independent estimates at the same radii. Each camera
-sample traces a path with long beams (:func:`gdlearn.integrators.photon.camera_beams.beam_path`)
+sample traces a path with long beams (``gdlearn.integrators.photon.camera_beams.beam_path``)
 and returns, per half:
 
 * the emission its path saw (exact, no photon), unless ``transport`` is media-only;

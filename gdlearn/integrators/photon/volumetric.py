@@ -2,12 +2,12 @@
 
 Both trace light paths with volume photons at every medium vertex (:mod:`gdlearn.photons.trace`,
 ``want_volume``), and camera paths with long beams (:mod:`gdlearn.integrators.photon.camera_beams`).
-A pixel's value is, per independent half (two light-path sets, two camera samples):
+A pixel's value is, per independent half (two light-path sets, two camera samples), the sum of
 
-    emission seen through the specular chain (exact)
-  + the surface photon estimate at the first non-specular vertex, weighted by the transmittance
-    on the way (as :mod:`gdlearn.integrators.photon.sppm`)
-  + the medium radiance along every camera beam (:mod:`gdlearn.integrators.photon.volume_estimates`)
+* the emission seen through the specular chain (exact),
+* the surface photon estimate at the first non-specular vertex, weighted by the transmittance
+  on the way (as :mod:`gdlearn.integrators.photon.sppm`),
+* the medium radiance along every camera beam (:mod:`gdlearn.integrators.photon.volume_estimates`),
 
 so the image converges to Mitsuba 3's ``volpath`` on the same file. ``transport="media"`` keeps
 only the last term: light transport ending in the medium, the setting of Gruson et al. 2018's
