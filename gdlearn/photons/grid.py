@@ -75,6 +75,13 @@ def build(points: np.ndarray, cell_size: float) -> HashGrid:
     return grid
 
 
+def build_rows(pos: np.ndarray, rows: np.ndarray, cell_size: float) -> HashGrid:
+    """The grid of the points ``pos[rows]`` whose queries answer ``rows`` (light-vertex rows), not
+    positions in the subset."""
+    g = build(pos[rows], cell_size)
+    return g._replace(order=rows[g.order])
+
+
 @block
 def query(grid, p, r, out):
     """Original ids of the points with |x - p| < r into ``out`` (in visiting order); returns how

@@ -237,6 +237,26 @@ def _borrow_out(o):
     return GatherOut(borrow(o.phi), borrow(o.m), borrow(o.le), borrow(o.foot), borrow(o.bad), borrow(o.ld))
 
 
+@block
+def pixel_angle(cam, fx, fy, d):
+    """The angle a pixel subtends around the ray d (PHOTONS.md Sec. 1.6: footprint = unfolded distance x it)."""
+    d1 = camera_ray(cam, fx + 1.0, fy)[1]
+    d2 = camera_ray(cam, fx, fy + 1.0)[1]
+    dd1 = math.sqrt((d1[0] - d[0]) ** 2 + (d1[1] - d[1]) ** 2 + (d1[2] - d[2]) ** 2)
+    dd2 = math.sqrt((d2[0] - d[0]) ** 2 + (d2[1] - d[1]) ** 2 + (d2[2] - d[2]) ** 2)
+    return max(dd1, dd2)
+
+
+@inlined
+def put_finite(dst, hh, y, x, v):
+    """Write the RGB value v into dst[hh, y, x] if it is finite (else leave it); returns whether it was."""
+    if not (np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])):
+        return False
+    for c in range(3):
+        dst[hh, y, x, c] = v[c]
+    return True
+
+
 @rows
 def _gather_rows(sa, lp, ga, gb, prm, seed, sample0, radius, out):
     for y in prange(radius.shape[0]):
@@ -266,27 +286,16 @@ def _gather_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
             out.foot[hh, y, x] = 0.0
             if not ok:
                 continue
-            d1 = camera_ray(cam, fx + 1.0, fy)[1]
-            d2 = camera_ray(cam, fx, fy + 1.0)[1]
-            dd1 = math.sqrt((d1[0] - d[0]) ** 2 + (d1[1] - d[1]) ** 2 + (d1[2] - d[2]) ** 2)
-            dd2 = math.sqrt((d2[0] - d[0]) ** 2 + (d2[1] - d[1]) ** 2 + (d2[2] - d[2]) ** 2)
-            out.foot[hh, y, x] = dist * max(dd1, dd2)      # PHOTONS.md Sec. 1.6, unfolded distance
+            out.foot[hh, y, x] = dist * pixel_angle(cam, fx, fy, d)
             if prm.nee and _wanted(prm.mask, state):
                 e = direct(sa, p, ng, frame, wi, sa.materials[mid], h, stack)
-                v = (beta[0] * e[0], beta[1] * e[1], beta[2] * e[2])
-                if np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2]):
-                    for c in range(3):
-                        out.ld[hh, y, x, c] = v[c]
-                else:
+                if not put_finite(out.ld, hh, y, x, (beta[0] * e[0], beta[1] * e[1], beta[2] * e[2])):
                     nbad += 1
             r = radius[y, x]
             if not r > 0.0:
                 continue
             phi, cnt = density(lp, grids[hh], prm, (p, ng, frame, wi, sa.materials[mid], state, m), r)
-            v = (beta[0] * phi[0], beta[1] * phi[1], beta[2] * phi[2])
-            if np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2]):
-                for c in range(3):
-                    out.phi[hh, y, x, c] = v[c]
+            if put_finite(out.phi, hh, y, x, (beta[0] * phi[0], beta[1] * phi[1], beta[2] * phi[2])):
                 out.m[hh, y, x] = cnt
             else:
                 nbad += 1

@@ -20,8 +20,8 @@ each pass is an independent estimate at r_i, and the frame is the mean of the pa
 state). The name says what it is: progressive photon mapping in the probabilistic, memoryless form.
 
 Both: surface scenes only (a scene with media is refused, naming the volumetric estimators
-``vpm`` and ``bre`` of :mod:`gdlearn.integrators.photon.volumetric`); alpha 0.7 by default (the reference code's and Gruson et al. 2018's; PHOTONS.md Appendix A); the initial
-radius is the pixel footprint at each pixel's gather point (PHOTONS.md Sec. 1.6), from camera paths
+``vpm`` and ``bre`` of :mod:`gdlearn.integrators.photon.volumetric`); alpha 0.7 by default (the
+reference code's and Gruson et al. 2018's; PHOTONS.md Appendix A); the initial radius is the pixel footprint at each pixel's gather point (PHOTONS.md Sec. 1.6), from camera paths
 of a sample index no pass uses (so the radius is independent of every estimate), times
 ``radius_scale`` -- or ``radius`` in scene units for every pixel. Each pass emits
 ``photons_per_pass`` light paths in two independent halves (j < n and j >= n) gathered by two
@@ -174,12 +174,9 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
             rows = rows[light_paths.depth[rows] >= 2]
         half = light_paths.path[rows] >= self.n_half
         cell = float(np.sqrt(np.percentile(self.r2, 90)))
-        grids = []
-        for sel in (rows[~half], rows[half]):
-            g = hashgrid.build(light_paths.pos[sel], cell)
-            grids.append(g._replace(order=sel[g.order]))      # the grid answers vertex rows
+        grids = tuple(hashgrid.build_rows(light_paths.pos, sel, cell) for sel in (rows[~half], rows[half]))
         self._nphotons = int(rows.size)
-        return light_paths, (grids[0], grids[1])
+        return light_paths, grids
 
     def emitted(self, photons) -> int:
         return 2 * self.n_half
@@ -191,8 +188,7 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
         import time
         t0 = time.perf_counter()
         lp = self.tracer.trace(self.seed, 0, 0, 4)
-        g = hashgrid.build(lp.pos[lp.photons], 1.0)
-        g = g._replace(order=lp.photons[g.order])
+        g = hashgrid.build_rows(lp.pos, lp.photons, 1.0)
         s = self.setup
         h, w = s.height, s.width
         self.height, self.width = 2, 2

@@ -29,11 +29,10 @@ from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.jit import block, rows
-from gdlearn.photons.grid import HashGrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.kernels.media.medium import medium_params, sample_distance_truncated_1
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, MAX_BEAMS, beam_path
-from gdlearn.integrators.photon.gather import density
+from gdlearn.integrators.photon.gather import _borrow_grid, density, pixel_angle, put_finite
 from gdlearn.integrators.photon.volume_estimates import bre_beam, vpm_beam
 
 #: VolumeParams.method
@@ -69,14 +68,9 @@ def new_out(h: int, w: int) -> VolumeOut:
 def gather_rows(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf, r_vol, out):
     """Every pixel's two camera samples into ``out``; ``r_surf``, ``r_vol`` (H x W) are the
     surface and VPM radii per pixel, ``radius`` the BRE radius per light-vertex row."""
-    _gather_rows(borrowed(sa), _borrow_rec(lp), _grid(sgrids[0]), _grid(sgrids[1]), _grid(vgrids[0]),
-                 _grid(vgrids[1]), bbhs[0], bbhs[1], borrow(radius), gprm, vprm, seed, sample0,
-                 r_surf, r_vol, _out(out))
-
-
-@block
-def _grid(g):
-    return HashGrid(borrow(g.pos), borrow(g.cell), borrow(g.order), borrow(g.start), g.inv_h, g.mask)
+    _gather_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(sgrids[0]), _borrow_grid(sgrids[1]),
+                 _borrow_grid(vgrids[0]), _borrow_grid(vgrids[1]), bbhs[0], bbhs[1], borrow(radius), gprm, vprm,
+                 seed, sample0, r_surf, r_vol, _out(out))
 
 
 @block
@@ -117,14 +111,11 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
                 for c in range(3):
                     out.le[hh, y, x, c] = le[c]
             if ok and vprm.surfaces:
-                out.foot[hh, y, x] = dist * _pixel_angle(sa.camera, fx, fy, d)
+                out.foot[hh, y, x] = dist * pixel_angle(sa.camera, fx, fy, d)
                 r = r_surf[y, x]
                 if r > 0.0:
                     phi, cnt = density(lp, sgrids[hh], gprm, (p, ng, frame, wi, sa.materials[mid], state, m), r)
-                    v = (beta[0] * phi[0], beta[1] * phi[1], beta[2] * phi[2])
-                    if np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2]):
-                        for c in range(3):
-                            out.phi[hh, y, x, c] = v[c]
+                    if put_finite(out.phi, hh, y, x, (beta[0] * phi[0], beta[1] * phi[1], beta[2] * phi[2])):
                         out.m[hh, y, x] = cnt
                     else:
                         nbad += 1
@@ -133,9 +124,7 @@ def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf
             _probe(sa.media, beams, rand_at(h, D_PROBE), out.probe, hh, y, x)
             a, cnt = _medium(sa, lp, vgrids[hh], bbhs[hh], radius, gprm, vprm, h, beams, bstate, nb, r_vol[y, x],
                              buf, kd, kv)
-            if np.isfinite(a[0]) and np.isfinite(a[1]) and np.isfinite(a[2]):
-                for c in range(3):
-                    out.phiv[hh, y, x, c] = a[c]
+            if put_finite(out.phiv, hh, y, x, a):
                 out.mv[hh, y, x] = cnt
             else:
                 nbad += 1
@@ -182,13 +171,3 @@ def _clear(out, hh, y, x):
     out.foot[hh, y, x] = 0.0
     for c in range(3):
         out.probe[hh, y, x, c] = math.nan
-
-
-@block
-def _pixel_angle(cam, fx, fy, d):
-    """The angle a pixel subtends around the ray d (PHOTONS.md Sec. 1.6: footprint = distance x it)."""
-    d1 = camera_ray(cam, fx + 1.0, fy)[1]
-    d2 = camera_ray(cam, fx, fy + 1.0)[1]
-    dd1 = math.sqrt((d1[0] - d[0]) ** 2 + (d1[1] - d[1]) ** 2 + (d1[2] - d[2]) ** 2)
-    dd2 = math.sqrt((d2[0] - d[0]) ** 2 + (d2[1] - d[1]) ** 2 + (d2[2] - d[2]) ** 2)
-    return max(dd1, dd2)

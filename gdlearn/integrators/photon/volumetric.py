@@ -196,7 +196,7 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
         rows = lp.photons
         rows = rows[lp.kind[rows] == K_SURFACE]
         cell = float(np.sqrt(np.percentile(self.r2, 90)))
-        return tuple(_grid(lp.pos, sel, cell) for sel in self._halves(lp, rows))
+        return tuple(hashgrid.build_rows(lp.pos, sel, cell) for sel in self._halves(lp, rows))
 
     def emitted(self, photons) -> int:
         return 2 * self.n_half
@@ -221,11 +221,6 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
         return {"light_paths": 2 * self.n_half, "light_vertices": len(lp), "volume_photons": int(nvol),
                 "photons_gathered": int(out.m.sum()), "volume_photons_gathered": int(out.mv.sum()),
                 "nonfinite_samples": int(out.bad.sum())}
-
-
-def _grid(pos, sel, cell):
-    g = hashgrid.build(pos[sel], cell)
-    return g._replace(order=sel[g.order])        # the grid answers vertex rows
 
 
 def _check(alpha, radius, volume_radius, neighbors, transport, samples):
@@ -276,7 +271,8 @@ class VPM(VolumetricPhotonMapper):
         cell = float(np.percentile(rv, 90)) if rv is not None and not self._knn() else self.rv0
         self._nvol = sum(s.size for s in vsel)
         b = bbh_mod.build(np.zeros((0, 3)), np.zeros(0))
-        return lp, self._surface_grids(lp), tuple(_grid(lp.pos, s, max(cell, self.r_min)) for s in vsel), (b, b)
+        vgrids = tuple(hashgrid.build_rows(lp.pos, s, max(cell, self.r_min)) for s in vsel)
+        return lp, self._surface_grids(lp), vgrids, (b, b)
 
     def gather(self, accel, pass_index: int) -> PassResult:
         lp, sg, vgr, bb = accel
