@@ -18,6 +18,13 @@ true image, in expectation: E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for independent
 ``--refs-only`` renders (and caches) the references and stops.
 
     .venv/bin/python benchmarks/bench_vpm.py --equal-time 15 --res 128 --seeds 3
+
+``--effects single-scattering`` renders only that class with every method (the reference is then
+gdlearn's pt, Mitsuba 3 cannot split its image); with ``--scenes scenes/fog-box.xml`` and
+``--radius-scale`` it is the thin-medium comparison of the papers (the medium alone):
+
+    .venv/bin/python benchmarks/bench_vpm.py --equal-time 15 --res 128 --scenes scenes/fog-box.xml \
+        --effects single-scattering --ref-spp 8192 --radius-scale 0.2 --methods vpm,bre-2d
 """
 from __future__ import annotations
 
@@ -70,6 +77,12 @@ def main(argv=None) -> int:
     ap.add_argument("--reference", choices=("mitsuba", "pt"), default="mitsuba")
     ap.add_argument("--ref-spp", type=int, default=16384)
     ap.add_argument("--refs-only", action="store_true")
+    ap.add_argument("--effects", default=None, metavar="E1,E2",
+                    help="render only these light-transport classes (e.g. single-scattering) with every method; "
+                         "the reference is then pt's (Mitsuba 3 cannot split its image by class)")
+    ap.add_argument("--radius-scale", type=float, default=1.0,
+                    help="every photon estimator's volume radius: this multiple of its default")
+    ap.add_argument("--methods", default="vpm,vpm-knn,bre-3d,bre-2d", help="photon estimators of --equal-time")
     a = ap.parse_args(argv)
     if a.equal_time is not None:
         return equal_time_study(a)
@@ -94,19 +107,22 @@ def equal_time_study(a) -> int:
     from gdlearn.experiments.references import mitsuba_reference, render_reference
     from gdlearn.experiments.study import Method
 
-    names = ["vpm", "vpm-knn", "bre-3d", "bre-2d"]
-    methods = ["pt"] + [Method(n, METHODS[n][0], None, tuple(sorted({**METHODS[n][1], "photons_per_pass": a.photons,
-                                                                       "threads": a.threads}.items())))
-                        for n in names]
+    names = a.methods.split(",")
+    effects = {"effects": tuple(a.effects.split(","))} if a.effects else {}
+    methods = [Method("pt", "pt", None, tuple(effects.items()))]
+    methods += [Method(n, METHODS[n][0], None, tuple(sorted({**METHODS[n][1], "photons_per_pass": a.photons,
+                                                             "threads": a.threads, **effects,
+                                                             "volume_radius_scale": a.radius_scale}.items())))
+                for n in names]
     print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
-          f"pass; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+          f"pass, effects {a.effects or 'all'}, radius scale {a.radius_scale}; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     for path in a.scenes.split(","):
         sf = SceneFile(path, (("res", a.res),))
         t0 = time.perf_counter()
-        if a.reference == "mitsuba":
+        if a.reference == "mitsuba" and not a.effects:
             ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
         else:
-            ref = render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64)
+            ref = render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64, **{k: list(v) for k, v in effects.items()})
         print(f"\n{sf.name}: reference {ref.estimator} {ref.spp} spp ({time.perf_counter() - t0:.0f} s, cached "
               f"after), relMSE floor {ref.floor:.2e}", flush=True)
         if a.refs_only:
