@@ -20,7 +20,7 @@ SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "ha
                  "halfvector+replay+reconnection")
 
 #: integrators that take --photons, --alpha and --radius
-PHOTON_INTEGRATORS = ("sppm", "ppm", "vpm", "bre")
+PHOTON_INTEGRATORS = ("sppm", "ppm", "gpm", "vpm", "bre")
 #: option -> (keyword, the integrators it applies to)
 PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alpha": ("alpha", PHOTON_INTEGRATORS),
                   "--radius": ("radius", PHOTON_INTEGRATORS), "--direct": ("direct", ("sppm", "ppm")),

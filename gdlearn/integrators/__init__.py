@@ -16,6 +16,7 @@ REGISTRY = {
     "gpt": "gdlearn.integrators.path.gpt:GradientPathTracer",
     "sppm": "gdlearn.integrators.photon.sppm:SPPM",
     "ppm": "gdlearn.integrators.photon.sppm:PPM",
+    "gpm": "gdlearn.integrators.photon.gpm:GPM",
     "vpm": "gdlearn.integrators.photon.volumetric:VPM",
     "bre": "gdlearn.integrators.photon.volumetric:BRE",
 }

@@ -1,0 +1,372 @@
+"""The camera pass of gradient-domain photon mapping (Hua et al. 2017, Sec. 4; PHOTONS.md Sec. 2).
+
+Every pixel's gather point (the SPPM gather of :mod:`gdlearn.integrators.photon.gather`) is
+shifted to its four neighbours, and every photon it gathers follows by the hybrid shift:
+
+1. **Sensor subpath**: the gather path is re-traced from the neighbour's film position (the base
+   position +-1 pixel, so the sub-pixel offset is kept) with the base path's random numbers -- the
+   random-sequence replay shift, whose path-space Jacobian is p(z) / p(z') (Kettunen et al. 2015;
+   :mod:`gdlearn.shifts.replay`): the offset's camera weight is its own f / p and the camera
+   side contributes 1 to the MIS ratio. On a gather point seen directly, and through delta
+   mirrors, this is the paper's half-vector copy (the direction law is the same); the shift is
+   refused when the offset's chain differs from the base's in length or in the classes of its
+   vertices (a symmetric test, so the two-way weights still sum to one).
+2. **Offset photon**: Eq. 5 (copy in the tangent frames) and the projection from the photon's
+   parent, Eq. 6 (:mod:`gdlearn.shifts.photon`).
+3. **Light subpath**: reconnection y_{s-1} -> y'_s when the parent is diffuse or glossy above the
+   threshold, or the emitter (area, point, spot). A parent on a specular chain would need the
+   manifold walk (Eq. 7-10), which this version does not do: such shifts *fail* (weight 1, zero
+   offset, counted), which keeps the gradient unbiased and makes it the primal finite difference
+   for those photons.
+
+The offset photon must lie within the base gather point's radius of the offset gather point
+(PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
+The MIS weight is Eq. 11 in ratio form (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`).
+
+Buffers (the contract of :mod:`gdlearn.integrators.gradients`), per half and base pixel: ``L``
+(index 0), ``D_k`` (1 + k) and ``S_k`` (5 + k), k = right, left, down, up, each once for the photon
+density terms (``phi``, to be divided by pi r^2 and the light paths emitted) and once for the
+emission the camera paths see (``le``: replayed camera paths, balance weight 1/2).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
+from gdlearn.kernels.arrays import borrow, borrowed
+from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf, vertex_class
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
+from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
+from gdlearn.photons import grid as hashgrid
+from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
+from gdlearn.photons.trace import _adjoint_weight, _borrow_rec
+from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, pixel_angle
+from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.shifts.photon import emission_profile, offset_target, photon_geometry_ratio
+from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
+
+#: outcome counters of the photon shifts (GpmOut.count[:, i])
+RECONNECTED, FAILED, NEEDS_MANIFOLD = 0, 1, 2
+
+
+class GpmOut(NamedTuple):
+    phi: np.ndarray       # (2, 9, H, W, 3): L, D_k, S_k of the photon terms (camera weight included)
+    le: np.ndarray        # (2, 9, H, W, 3): the same for the emission seen by the camera paths
+    m: np.ndarray         # (2, H, W): photons found by the base gather point (SPPM's M)
+    foot: np.ndarray      # (2, H, W): pixel footprint at the base gather point (0: none)
+    count: np.ndarray     # (2, 3, H, W): photon shifts reconnected / failed / needing the manifold walk
+    bad: np.ndarray       # (H,): non-finite terms dropped
+
+
+def allocate(h: int, w: int) -> GpmOut:
+    return GpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, h, w)),
+                  np.zeros((2, 3, h, w)), np.zeros(h, np.int64))
+
+
+@block
+def _parent_factor(sa, lp, q, v, d_new):
+    """The parent y_{s-1} = row q re-evaluated towards ``d_new`` (reconnection): returns (status,
+    (f'/f per channel), p_w(w') / p_w(w), ray origin). status 0: ok, 1: fails, 2: needs the manifold
+    walk (a specular parent)."""
+    one = (1.0, 1.0, 1.0)
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    d_b = (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
+    if lp.kind[q] == K_EMITTER:
+        fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
+        fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
+        if not (fb > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
+            return 1, one, 0.0, yq
+        o = offset_origin(yq, nq, d_new) if lp.prim[q] >= 0 else yq
+        r = fo / fb
+        return 0, (r, r, r), po / pb, o
+    if lp.kind[q] != K_SURFACE:
+        return 1, one, 0.0, yq
+    if (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY):
+        return 2, one, 0.0, yq
+    if not dot(d_b, nq) * dot(d_new, nq) > 0.0:            # the offset must leave on the base's side
+        return 1, one, 0.0, yq
+    mat = sa.materials[lp.obj[q]]
+    ns = (lp.nsh[q, 0], lp.nsh[q, 1], lp.nsh[q, 2])
+    s, t = coordinate_system(ns)
+    wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
+    wi = to_local(wi_w, s, t, ns)
+    wb = to_local(d_b, s, t, ns)
+    wo = to_local(d_new, s, t, ns)
+    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
+    fo = _adjoint_weight(mat, bsdf_eval(mat, wi, wo), wi, wo, wi_w, d_new, nq, ns)
+    pb = bsdf_pdf(mat, wi, wb)
+    po = bsdf_pdf(mat, wi, wo)
+    if not (pb > 0.0 and po > 0.0):
+        return 1, one, 0.0, yq
+    for c in range(3):
+        if (fb[c] > 0.0) != (fo[c] > 0.0):                 # a channel only one side carries: refuse both ways
+            return 1, one, 0.0, yq
+    r = (_ratio(fo[0], fb[0]), _ratio(fo[1], fb[1]), _ratio(fo[2], fb[2]))
+    return 0, r, po / pb, offset_origin(yq, nq, d_new)
+
+
+@block
+def _ratio(a, b):
+    return a / b if b > 0.0 else 0.0
+
+
+@block
+def shift_photon(sa, lp, prm, v, base, off, r, stack):
+    """The hybrid shift's light half for photon row ``v`` gathered at ``base`` = (p, frame) and
+    moved to the offset gather point ``off`` = (p', ng', frame', wi', mat'). Returns (status,
+    photon term at the offset (before the camera weight), MIS density ratio offset / base)."""
+    zero = (0.0, 0.0, 0.0)
+    p, frame = base
+    p2, ng2, frame2, wi2, mat2 = off
+    q = lp.parent[v]
+    if q < 0:
+        return FAILED, zero, 0.0
+    ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    ystar = offset_target(ys, p, frame, p2, frame2)                        # Eq. 5
+    dv = (ystar[0] - yq[0], ystar[1] - yq[1], ystar[2] - yq[2])
+    dl = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+    if not dl > 0.0:
+        return FAILED, zero, 0.0
+    d = (dv[0] / dl, dv[1] / dl, dv[2] / dl)
+    status, fr, pr, o = _parent_factor(sa, lp, q, v, d)
+    if status != 0:
+        return (NEEDS_MANIFOLD if status == 2 else FAILED), zero, 0.0
+    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
+    if prim < 0:
+        return FAILED, zero, 0.0
+    yh, ngh, nsh = surface(sa.prims, sa.prim_info, prim, o, d, t, u, w)    # the projection y'_s
+    if vertex_class(sa.materials[sa.prim_info[prim, INFO_MAT]], prm.threshold) == L.V_SPECULAR:
+        return FAILED, zero, 0.0                                          # no photon is stored there
+    dx, dy, dz = yh[0] - p2[0], yh[1] - p2[1], yh[2] - p2[2]
+    if not dx * dx + dy * dy + dz * dz < r * r:                            # outside the kernel (Sec. 2.6)
+        return FAILED, zero, 0.0
+    if not _reversible(sa, lp, q, o, ys, yh, ystar, p, frame, p2, frame2, r, stack):
+        return FAILED, zero, 0.0
+    # y* lies on the photon's tangent plane carried by the rigid map of Eq. 5: its normal is the
+    # photon's, rotated (the offset gather point's normal, the reference code's choice, is the same
+    # for a photon on the gather point's own plane and wrong for one on a neighbouring surface)
+    nv = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
+    nstar = rotate(nv, frame, frame2)
+    geo = photon_geometry_ratio(yq, ys, nv, ystar, nstar)
+    wo_w = (-d[0], -d[1], -d[2])
+    cg = abs(dot(wo_w, ng2))
+    if not (geo > 0.0 and cg > 1e-9):
+        return FAILED, zero, 0.0
+    ns2, s2, t2 = frame2
+    f = bsdf_eval(mat2, wi2, to_local(wo_w, s2, t2, ns2))
+    k = geo / cg
+    term = (f[0] * lp.beta[v, 0] * fr[0] * k, f[1] * lp.beta[v, 1] * fr[1] * k, f[2] * lp.beta[v, 2] * fr[2] * k)
+    return RECONNECTED, term, pr * geo
+
+
+@block
+def rotate(n, frame, frame_o):
+    """M' M^-1 n: a direction carried from the base gather point's frame to the offset's (Eq. 5)."""
+    a, b, c = frame
+    ao, bo, co = frame_o
+    loc = to_local(n, b, c, a)
+    return to_world(loc, bo, co, ao)
+
+
+#: y'_s counts as y*_s (no projection happened) within this fraction of the kernel radius (plus the
+#: rounding of spawned rays, :func:`_tolerance`)
+SAME_POINT = 1e-6
+
+
+@block
+def _reversible(sa, lp, q, o, ys, yh, ystar, p, frame, p2, frame2, r, stack):
+    """Does the inverse shift take the offset photon y'_s back to y_s (Hua et al. 2017 Sec. 4.3)?
+    When the projection did not move y* (y'_s = y*_s, a photon on a plane the shift slides along)
+    Eq. 5 inverts exactly; otherwise the inverse target is projected from the parent and must land
+    on y_s. Without this the two MIS weights of a path pair need not sum to one (a photon near a
+    corner, whose y* falls off its surface, projects onto the next one)."""
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    tol = _tolerance(yq, r)
+    ex, ey, ez = yh[0] - ystar[0], yh[1] - ystar[1], yh[2] - ystar[2]
+    if ex * ex + ey * ey + ez * ez <= tol * tol:
+        return True
+    yback = offset_target(yh, p2, frame2, p, frame)
+    dv = (yback[0] - yq[0], yback[1] - yq[1], yback[2] - yq[2])
+    dl = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+    if not dl > 0.0:
+        return False
+    d = (dv[0] / dl, dv[1] / dl, dv[2] / dl)
+    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
+    o2 = offset_origin(yq, nq, d) if (nq[0] != 0.0 or nq[1] != 0.0 or nq[2] != 0.0) else yq
+    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o2, d, 0.0, math.inf, stack)
+    if prim < 0:
+        return False
+    hit = (o2[0] + t * d[0], o2[1] + t * d[1], o2[2] + t * d[2])
+    fx, fy, fz = hit[0] - ys[0], hit[1] - ys[1], hit[2] - ys[2]
+    return fx * fx + fy * fy + fz * fz <= tol * tol
+
+
+@block
+def _tolerance(yq, r):
+    """How far two hits of rays from the parent may lie apart and count as one point: a millionth of
+    the kernel radius plus 100 x the push of a spawned ray's origin (geometry.offset_origin: the
+    ray starts that far off the surface, so its hit moves by about that over the cosine)."""
+    push = 1e-9 * max(abs(yq[0]), max(abs(yq[1]), abs(yq[2]))) + 1e-7
+    return SAME_POINT * r + 100.0 * push
+
+
+@block
+def gpm_rows(sa, lp, grids, prm, seed, sample0, radius, out):
+    """Every pixel's two base gather points (samples sample0 + h, half h queries grids[h]) and their
+    four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel."""
+    _gpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), prm, seed, sample0,
+              radius, _borrow_out(out))
+
+
+@block
+def _borrow_out(o):
+    return GpmOut(borrow(o.phi), borrow(o.le), borrow(o.m), borrow(o.foot), borrow(o.count), borrow(o.bad))
+
+
+@rows
+def _gpm_rows(sa, lp, ga, gb, prm, seed, sample0, radius, out):
+    for y in prange(radius.shape[0]):
+        out.bad[y] = _gpm_row(sa, lp, (ga, gb), prm, seed, sample0, radius, out, y)
+
+
+@block
+def _put(buf, hh, i, y, x, v, scale):
+    for c in range(3):
+        buf[hh, i, y, x, c] += scale * v[c]
+
+
+@block
+def _finite3(v):
+    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
+
+
+@block
+def _gpm_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
+    hgt, w = radius.shape
+    cam = sa.camera
+    nbad = 0
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    cand = np.empty(4096, dtype=np.int64)
+    # the four offset gather points of the current base sample
+    o_ok = np.zeros(4, dtype=np.bool_)
+    o_p = np.zeros((4, 3))
+    o_ng = np.zeros((4, 3))
+    o_fr = np.zeros((4, 3, 3))
+    o_wi = np.zeros((4, 3))
+    o_mat = np.zeros(4, dtype=np.int64)
+    o_beta = np.zeros((4, 3))
+    for x in range(w):
+        for hh in range(2):
+            h = path_state(seed, y * w + x, sample0 + hh)
+            fx = x + rand_at(h, 0)
+            fy = y + rand_at(h, 1)
+            o, d, tmax = camera_ray(cam, fx, fy)
+            ok, p, ng, frame, wi, mid, beta, state, m, dist, le = gather_path(sa, prm, h, o, d, stack)
+            if _finite3(le):
+                _put(out.le, hh, 0, y, x, le, 1.0)
+            for k in range(4):
+                o_ok[k] = False
+                xo, yo = x + SHIFT_DX[k], y + SHIFT_DY[k]
+                if not (0 <= xo < w and 0 <= yo < hgt):
+                    if _finite3(le):
+                        _put(out.le, hh, 1 + k, y, x, le, -1.0)      # a shift outside the image fails
+                    continue
+                o2, d2, _ = camera_ray(cam, fx + SHIFT_DX[k], fy + SHIFT_DY[k])
+                ok2, p2, ng2, fr2, wi2, mid2, beta2, state2, m2, _, le2 = gather_path(sa, prm, h, o2, d2, stack)
+                if _finite3(le) and _finite3(le2):                   # replayed camera paths: w = 1/2 each way
+                    _put(out.le, hh, 1 + k, y, x, (le2[0] - le[0], le2[1] - le[1], le2[2] - le[2]), 0.5)
+                    _put(out.le, hh, 5 + k, y, x, le2, 0.5)
+                if ok and ok2 and m2 == m and state2 == state:
+                    o_ok[k] = True
+                    for c in range(3):
+                        o_p[k, c] = p2[c]
+                        o_ng[k, c] = ng2[c]
+                        o_wi[k, c] = wi2[c]
+                        o_beta[k, c] = beta2[c]
+                        for a in range(3):
+                            o_fr[k, a, c] = fr2[a][c]
+                    o_mat[k] = mid2
+            if not ok:
+                continue
+            out.foot[hh, y, x] = dist * pixel_angle(cam, fx, fy, d)
+            r = radius[y, x]
+            if not r > 0.0:
+                continue
+            n = hashgrid.query(grids[hh], p, r, cand)
+            if n > cand.shape[0]:
+                cand = np.empty(2 * n, dtype=np.int64)
+                n = hashgrid.query(grids[hh], p, r, cand)
+            nbad += _shift_photons(sa, lp, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
+                                   (o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta), stack)
+    return nbad
+
+
+@block
+def _offset(offs, k):
+    o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta = offs
+    fr = ((o_fr[k, 0, 0], o_fr[k, 0, 1], o_fr[k, 0, 2]), (o_fr[k, 1, 0], o_fr[k, 1, 1], o_fr[k, 1, 2]),
+          (o_fr[k, 2, 0], o_fr[k, 2, 1], o_fr[k, 2, 2]))
+    return ((o_p[k, 0], o_p[k, 1], o_p[k, 2]), (o_ng[k, 0], o_ng[k, 1], o_ng[k, 2]), fr,
+            (o_wi[k, 0], o_wi[k, 1], o_wi[k, 2]), o_mat[k], (o_beta[k, 0], o_beta[k, 1], o_beta[k, 2]))
+
+
+@block
+def _shift_photons(sa, lp, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
+    """The base gather point's photons cand[:n]: their base terms and their four shifts."""
+    p, ng, frame, wi, mid, beta, state, m = gp
+    ns, s, tt = frame
+    mat = sa.materials[mid]
+    o_ok = offs[0]
+    nbad = 0
+    cnt = 0
+    for i in range(n):
+        v = cand[i]
+        if lp.depth[v] + m + 1 > prm.max_depth:
+            continue
+        if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
+            continue
+        cnt += 1
+        wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
+        cg = abs(dot(wo_w, ng))
+        if not cg > 1e-9:
+            continue
+        f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
+        c_b = (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
+               beta[2] * f[2] * lp.beta[v, 2] / cg)
+        if not _finite3(c_b):
+            nbad += 1
+            continue
+        _put(out.phi, hh, 0, y, x, c_b, 1.0)
+        for k in range(4):
+            status = FAILED
+            term = (0.0, 0.0, 0.0)
+            ratio = 0.0
+            beta2 = (0.0, 0.0, 0.0)
+            c_o = (0.0, 0.0, 0.0)
+            if o_ok[k]:
+                p2, ng2, fr2, wi2, mid2, beta2 = _offset(offs, k)
+                status, term, ratio = shift_photon(sa, lp, prm, v, (p, frame), (p2, ng2, fr2, wi2, sa.materials[mid2]),
+                                                   r, stack)
+            if status == RECONNECTED:
+                c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
+                if not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
+                    status = FAILED
+            out.count[hh, status, y, x] += 1
+            if status != RECONNECTED:
+                _put(out.phi, hh, 1 + k, y, x, c_b, -1.0)           # w = 1, no offset (Hua et al. Sec. 4.3)
+                continue
+            wgt = mis_weight_from_log_ratio(math.log(ratio))        # Eq. 11: 1 / (1 + p'|J| / p)
+            _put(out.phi, hh, 1 + k, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
+            _put(out.phi, hh, 5 + k, y, x, c_o, wgt)
+    out.m[hh, y, x] = cnt
+    return nbad
