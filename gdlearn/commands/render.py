@@ -4,7 +4,7 @@ Stops after ``--spp`` samples per pixel or ``--time`` seconds of rendering (JIT 
 counted), whichever comes first. ``--out`` picks the format from its extension (.exr, .png tone-mapped,
 .npy linear float); ``--buffers DIR`` also writes every buffer of the final frame (primal, gradients,
 half-buffers, variances) as .npy. Ctrl-C stops early and still writes what was accumulated.
-For gradient integrators (``--integrator gpt-replay``), ``--recon {cv,cv-weighted,l2,l1}`` writes the
+For gradient integrators (``--integrator gpt-replay``, ``gpt``, ``gpm``), ``--recon {cv,cv-weighted,l2,l1}`` writes the
 reconstructed image to ``--out`` instead of the primal (and ``recon.npy`` beside the buffers).
 Scene defaults are overridden with ``--set name=value`` (like ``mitsuba.load_file(path, res=64)``).
 """

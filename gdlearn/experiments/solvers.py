@@ -11,6 +11,12 @@ solver names the CLI uses (``--solver``):
   the papers' alpha = 0.2 (Hua et al. 2017 §5: "the lambda parameter for Poisson reconstruction is set to
   a small value, lambda = 0.2").
 
+A frame that carries ``emission`` with its gradients ``emission_gx``, ``emission_gy`` (gpm: the
+emission its camera paths see directly or through specular chains, which every sample evaluates
+exactly) is reconstructed without that part, which is added back afterwards: a light's edge makes
+gradients of the light's radiance from only a few camera samples a pixel, and a screened Poisson
+solve would smear their noise over the dim surfaces around it.
+
 A solver may also be any callable ``f(frame) -> image``; tests use that to stay independent of the
 reconstruction library.
 """
@@ -60,12 +66,20 @@ class _Bound:
                              "integrator produced only a primal image; drop --solver for primal methods")
         kwargs = dict(options)
         params = inspect.signature(self.fn).parameters
+        primal, gx, gy, halves = frame.primal, frame.gx, frame.gy, frame.halves
+        kept = frame.images.get("emission") if "emission_gx" in frame.images else None
+        if kept is not None:
+            # the estimator split off a part it estimates well by itself (the emission its camera
+            # paths see, sampled exactly): the solver reconstructs the rest, the part is added back
+            primal, gx, gy = primal - kept, gx - frame.images["emission_gx"], gy - frame.images["emission_gy"]
+            halves = {n: tuple(a - b for a, b in zip(halves[n], halves[f"emission{'_' + n if n != 'primal' else ''}"]))
+                      for n in ("primal", "gx", "gy")}
         if self.weighted and "halves" in params:
             # the solver estimates (and pools) the variances from the two half-buffers itself
-            kwargs.setdefault("halves", {n: frame.halves[n] for n in ("primal", "gx", "gy")})
+            kwargs.setdefault("halves", {n: halves[n] for n in ("primal", "gx", "gy")})
         elif self.weighted:
             # Weighted reconstructions take per-pixel variances of primal and gradients (Eq. 20-22).
-            var = {n: frame.variance(n) for n in ("primal", "gx", "gy")}
+            var = {n: 0.25 * (halves[n][0] - halves[n][1]) ** 2 for n in ("primal", "gx", "gy")}   # Frame.variance
             if "weights" in params:
                 kwargs.setdefault("weights", var)
             elif "variances" in params:
@@ -76,12 +90,13 @@ class _Bound:
                         kwargs.setdefault(f"var_{n}", var[n])
             if "weighted" in params:
                 kwargs.setdefault("weighted", True)
-        out = self.fn(frame.primal, frame.gx, frame.gy, **kwargs)
+        out = self.fn(primal, gx, gy, **kwargs)
         if hasattr(out, "image"):           # gdlearn.reconstruct.Reconstruction
             out = out.image
         elif isinstance(out, tuple):        # (image, info) style results
             out = out[0]
-        return np.asarray(out, dtype=np.float64)
+        out = np.asarray(out, dtype=np.float64)
+        return out if kept is None else out + kept
 
     def __reduce__(self):                   # pickle by name: workers re-import gdlearn.reconstruct
         return (resolve, (self.name,))

@@ -21,7 +21,10 @@ consistent. At one fixed radius for every pixel (``radius=r, alpha=1``) the grad
 for the differences of the blurred image (``tests/test_gpm.py``).
 
 The primal image is the MIS-weighted one (:func:`gdlearn.integrators.gradients.mis_primal`; the
-base estimate alone is ``primal_base``). ``shift_reconnected``, ``shift_failed`` and
+base estimate alone is ``primal_base``). ``emission`` is the part the camera paths see directly
+or through specular chains (emitters, added exactly as in SPPM), with its gradients
+``emission_gx``, ``emission_gy`` (the replayed camera paths, balance weight 1/2): the
+reconstructions leave it out and add it back (:mod:`gdlearn.experiments.solvers`). ``shift_reconnected``, ``shift_failed`` and
 ``shift_needs_manifold`` count the photon shifts per base pixel (summed over passes): a photon whose
 parent lies on a specular chain needs the manifold walk of Eq. 7-10, which this version does not
 do, so that shift fails (weight 1, the primal difference; unbiased, just noisier).
@@ -86,12 +89,14 @@ class GPM(SurfacePhotonMapper):
         self.counts += out.count.sum(axis=0)
         self._m = out.m.sum(axis=0)
         k = pass_index + 1
-        buf = self.D / (self.n_half * k) + self.E / k            # (2, 9, H, W, 3): per half
-        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy")}
-        for b in buf:
-            gx, gy = combine_gradients(b[1:5], (1.0, 1.0))       # MIS weights are inside the buffers
-            for name, img in (("primal", mis_primal(b)), ("primal_base", b[0]), ("gx", gx), ("gy", gy)):
-                halves[name].append(img)
+        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy", "emission", "emission_gx", "emission_gy")}
+        for dens, emis in zip(self.D / (self.n_half * k), self.E / k):        # per half: (9, H, W, 3)
+            for prefix, b in (("", dens + emis), ("emission_", emis)):
+                gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # MIS weights are inside the buffers
+                halves[prefix + "gx"].append(gx)
+                halves[prefix + "gy"].append(gy)
+                halves[prefix + "primal" if not prefix else "emission"].append(mis_primal(b))
+            halves["primal_base"].append(dens[0] + emis[0])
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         images["shift_reconnected"] = self.counts[RECONNECTED].copy()
         images["shift_failed"] = self.counts[FAILED].copy()
