@@ -32,7 +32,7 @@ def test_render_gpm_with_recon_and_buffers(tmp_path):
     assert img.shape == (12, 12, 3) and np.isfinite(img).all() and img.mean() > 0
     b = tmp_path / "b"
     for name in ("primal", "gx", "gy", "primal_a", "primal_b", "gx_var", "recon", "shift_reconnected",
-                 "shift_failed", "shift_needs_manifold", "radius"):
+                 "shift_failed", "shift_manifold", "radius"):
         assert (b / f"{name}.npy").is_file(), name
     assert np.load(b / "shift_reconnected.npy").sum() > 0
     assert np.allclose(np.load(b / "recon.npy"), img)

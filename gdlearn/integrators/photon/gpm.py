@@ -24,10 +24,11 @@ The primal image is the MIS-weighted one (:func:`gdlearn.integrators.gradients.m
 base estimate alone is ``primal_base``). ``emission`` is the part the camera paths see directly
 or through specular chains (emitters, added exactly as in SPPM), with its gradients
 ``emission_gx``, ``emission_gy`` (the replayed camera paths, balance weight 1/2): the
-reconstructions leave it out and add it back (:mod:`gdlearn.experiments.solvers`). ``shift_reconnected``, ``shift_failed`` and
-``shift_needs_manifold`` count the photon shifts per base pixel (summed over passes): a photon whose
-parent lies on a specular chain needs the manifold walk of Eq. 7-10, which this version does not
-do, so that shift fails (weight 1, the primal difference; unbiased, just noisier).
+reconstructions leave it out and add it back (:mod:`gdlearn.experiments.solvers`). ``shift_reconnected``, ``shift_manifold`` and
+``shift_failed`` count the photon shifts per base pixel (summed over passes): reconnected to a
+diffuse or glossy parent or the emitter, moved by the manifold walk (a parent on a delta chain of
+analytic shapes, Eq. 7-8), or failed (weight 1, the primal difference; unbiased, just noisier --
+glossy chains, Eq. 9-10, are not walked and fail).
 
 Refused: media (``vpm`` / ``bre`` instead), ``direct="nee"`` (its emitter sample would need a
 shift of its own).
@@ -38,7 +39,8 @@ import numpy as np
 
 from gdlearn.integrators.base import PassResult
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
-from gdlearn.integrators.photon.gpm_gather import FAILED, NEEDS_MANIFOLD, RECONNECTED, allocate, gpm_rows
+from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
+from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, allocate, gpm_rows
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, SurfacePhotonMapper, accumulate_density, reduce_radius
 from gdlearn.photons import grid as hashgrid
 
@@ -54,11 +56,12 @@ class GPM(SurfacePhotonMapper):
             raise ValueError("gpm estimates the direct light with photons (a gradient of the emitter sample at the "
                              "gather point would need a shift of its own); fix: drop direct=/--direct")
         super().__init__(scene, alpha=alpha, direct="photons", **options)
+        self.mtab = manifold_table(scene, self.setup.sa)     # analytic specular shapes: the manifold branch
 
     def _gpm(self, light_paths, grids, sample0, radius):
         out = allocate(self.height, self.width)
         with self.setup.parallel(self.height):
-            gpm_rows(self.setup.sa, light_paths, grids, self.gather_params, self.seed, sample0, radius, out)
+            gpm_rows(self.setup.sa, light_paths, grids, self.mtab, self.gather_params, self.seed, sample0, radius, out)
         return out
 
     def compile(self) -> float:
@@ -100,13 +103,13 @@ class GPM(SurfacePhotonMapper):
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         images["shift_reconnected"] = self.counts[RECONNECTED].copy()
         images["shift_failed"] = self.counts[FAILED].copy()
-        images["shift_needs_manifold"] = self.counts[NEEDS_MANIFOLD].copy()
+        images["shift_manifold"] = self.counts[MANIFOLD].copy()
         stats = {"light_paths": 2 * self.n_half, "light_vertices": len(lp), "photons_stored": self._nphotons,
                  "gather_points": int((out.foot > 0).sum()), "photons_gathered": int(out.m.sum()),
                  "nonfinite_samples": int(out.bad.sum()),
                  "photon_shifts_reconnected": int(out.count[:, RECONNECTED].sum()),
                  "photon_shifts_failed": int(out.count[:, FAILED].sum()),
-                 "photon_shifts_needing_manifold": int(out.count[:, NEEDS_MANIFOLD].sum())}
+                 "photon_shifts_manifold": int(out.count[:, MANIFOLD].sum())}
         return PassResult(images=images, spp=2, halves={n: tuple(v) for n, v in halves.items()}, stats=stats)
 
     def update_radius(self, pass_index: int) -> None:

@@ -13,11 +13,12 @@ shifted to its four neighbours, and every photon it gathers follows by the hybri
    vertices (a symmetric test, so the two-way weights still sum to one).
 2. **Offset photon**: Eq. 5 (copy in the tangent frames) and the projection from the photon's
    parent, Eq. 6 (:mod:`gdlearn.shifts.photon`).
-3. **Light subpath**: reconnection y_{s-1} -> y'_s when the parent is diffuse or glossy above the
-   threshold, or the emitter (area, point, spot). A parent on a specular chain would need the
-   manifold walk (Eq. 7-10), which this version does not do: such shifts *fail* (weight 1, zero
-   offset, counted), which keeps the gradient unbiased and makes it the primal finite difference
-   for those photons.
+3. **Light subpath** (:mod:`gdlearn.integrators.photon.gpm_light`): reconnection y_{s-1} -> y'_s
+   when the parent is diffuse or glossy above the threshold, or the emitter (area, point, spot);
+   the manifold walk (Eq. 7-8) when the parent lies on a chain of delta vertices on analytic shapes
+   (spheres, rectangles). Glossy chains (Eq. 9-10) and chains the walk cannot move *fail*
+   (weight 1, zero offset, counted), which keeps the gradient unbiased and makes it the primal
+   finite difference for those photons.
 
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
@@ -39,22 +40,22 @@ from numba import prange
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.arrays import borrow, borrowed
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf, vertex_class
+from gdlearn.kernels.bsdf.dispatch import bsdf_eval, vertex_class
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
 from gdlearn.kernels.jit import block, rows
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
 from gdlearn.photons import grid as hashgrid
-from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
-from gdlearn.photons.trace import _adjoint_weight, _borrow_rec
+from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, pixel_angle
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.shifts.photon import emission_profile, offset_target, photon_geometry_ratio
+from gdlearn.integrators.photon.gpm_light import manifold_photon, parent_factor
+from gdlearn.shifts.photon import offset_target, photon_geometry_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 
-#: outcome counters of the photon shifts (GpmOut.count[:, i])
-RECONNECTED, FAILED, NEEDS_MANIFOLD = 0, 1, 2
+#: outcome counters of the photon shifts (GpmOut.count[:, i]): reconnected, failed, moved by the manifold walk
+RECONNECTED, FAILED, MANIFOLD = 0, 1, 2
 
 
 class GpmOut(NamedTuple):
@@ -62,7 +63,7 @@ class GpmOut(NamedTuple):
     le: np.ndarray        # (2, 9, H, W, 3): the same for the emission seen by the camera paths
     m: np.ndarray         # (2, H, W): photons found by the base gather point (SPPM's M)
     foot: np.ndarray      # (2, H, W): pixel footprint at the base gather point (0: none)
-    count: np.ndarray     # (2, 3, H, W): photon shifts reconnected / failed / needing the manifold walk
+    count: np.ndarray     # (2, 3, H, W): photon shifts reconnected / failed / moved by the manifold walk
     bad: np.ndarray       # (H,): non-finite terms dropped
 
 
@@ -72,55 +73,7 @@ def allocate(h: int, w: int) -> GpmOut:
 
 
 @block
-def _parent_factor(sa, lp, q, v, d_new):
-    """The parent y_{s-1} = row q re-evaluated towards ``d_new`` (reconnection): returns (status,
-    (f'/f per channel), p_w(w') / p_w(w), ray origin). status 0: ok, 1: fails, 2: needs the manifold
-    walk (a specular parent)."""
-    one = (1.0, 1.0, 1.0)
-    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    d_b = (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
-    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
-    if lp.kind[q] == K_EMITTER:
-        fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
-        fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
-        if not (fb > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
-            return 1, one, 0.0, yq
-        o = offset_origin(yq, nq, d_new) if lp.prim[q] >= 0 else yq
-        r = fo / fb
-        return 0, (r, r, r), po / pb, o
-    if lp.kind[q] != K_SURFACE:
-        return 1, one, 0.0, yq
-    if (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY):
-        return 2, one, 0.0, yq
-    if not dot(d_b, nq) * dot(d_new, nq) > 0.0:            # the offset must leave on the base's side
-        return 1, one, 0.0, yq
-    mat = sa.materials[lp.obj[q]]
-    ns = (lp.nsh[q, 0], lp.nsh[q, 1], lp.nsh[q, 2])
-    s, t = coordinate_system(ns)
-    wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
-    wi = to_local(wi_w, s, t, ns)
-    wb = to_local(d_b, s, t, ns)
-    wo = to_local(d_new, s, t, ns)
-    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
-    fo = _adjoint_weight(mat, bsdf_eval(mat, wi, wo), wi, wo, wi_w, d_new, nq, ns)
-    pb = bsdf_pdf(mat, wi, wb)
-    po = bsdf_pdf(mat, wi, wo)
-    if not (pb > 0.0 and po > 0.0):
-        return 1, one, 0.0, yq
-    for c in range(3):
-        if (fb[c] > 0.0) != (fo[c] > 0.0):                 # a channel only one side carries: refuse both ways
-            return 1, one, 0.0, yq
-    r = (_ratio(fo[0], fb[0]), _ratio(fo[1], fb[1]), _ratio(fo[2], fb[2]))
-    return 0, r, po / pb, offset_origin(yq, nq, d_new)
-
-
-@block
-def _ratio(a, b):
-    return a / b if b > 0.0 else 0.0
-
-
-@block
-def shift_photon(sa, lp, prm, v, base, off, r, stack):
+def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     """The hybrid shift's light half for photon row ``v`` gathered at ``base`` = (p, frame) and
     moved to the offset gather point ``off`` = (p', ng', frame', wi', mat'). Returns (status,
     photon term at the offset (before the camera weight), MIS density ratio offset / base)."""
@@ -138,9 +91,23 @@ def shift_photon(sa, lp, prm, v, base, off, r, stack):
     if not dl > 0.0:
         return FAILED, zero, 0.0
     d = (dv[0] / dl, dv[1] / dl, dv[2] / dl)
-    status, fr, pr, o = _parent_factor(sa, lp, q, v, d)
+    status, fr, pr, o = parent_factor(sa, lp, q, v, d)
+    if status == 2:                                                        # a specular parent
+        nv = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
+        ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, rotate(nv, frame, frame2), r, p2,
+                                                stack)
+        if not ok:
+            return FAILED, zero, 0.0
+        wo_w = (-w_arr[0], -w_arr[1], -w_arr[2])
+        cg = abs(dot(wo_w, ng2))
+        if not cg > 1e-9:
+            return FAILED, zero, 0.0
+        ns2, s2, t2 = frame2
+        f = bsdf_eval(mat2, wi2, to_local(wo_w, s2, t2, ns2))
+        return MANIFOLD, (f[0] * lp.beta[v, 0] * ratio3[0] / cg, f[1] * lp.beta[v, 1] * ratio3[1] / cg,
+                          f[2] * lp.beta[v, 2] * ratio3[2] / cg), pp
     if status != 0:
-        return (NEEDS_MANIFOLD if status == 2 else FAILED), zero, 0.0
+        return FAILED, zero, 0.0
     t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
     if prim < 0:
         return FAILED, zero, 0.0
@@ -221,11 +188,12 @@ def _tolerance(yq, r):
 
 
 @block
-def gpm_rows(sa, lp, grids, prm, seed, sample0, radius, out):
+def gpm_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     """Every pixel's two base gather points (samples sample0 + h, half h queries grids[h]) and their
-    four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel."""
-    _gpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), prm, seed, sample0,
-              radius, _borrow_out(out))
+    four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel;
+    ``mtab`` the manifold shape rows of the primitives (the manifold branch's chains)."""
+    _gpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), borrow(mtab), prm, seed,
+              sample0, radius, _borrow_out(out))
 
 
 @block
@@ -234,9 +202,9 @@ def _borrow_out(o):
 
 
 @rows
-def _gpm_rows(sa, lp, ga, gb, prm, seed, sample0, radius, out):
+def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
     for y in prange(radius.shape[0]):
-        out.bad[y] = _gpm_row(sa, lp, (ga, gb), prm, seed, sample0, radius, out, y)
+        out.bad[y] = _gpm_row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
 
 
 @block
@@ -251,7 +219,7 @@ def _finite3(v):
 
 
 @block
-def _gpm_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
+def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     hgt, w = radius.shape
     cam = sa.camera
     nbad = 0
@@ -306,7 +274,7 @@ def _gpm_row(sa, lp, grids, prm, seed, sample0, radius, out, y):
             if n > cand.shape[0]:
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
-            nbad += _shift_photons(sa, lp, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
+            nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
                                    (o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta), stack)
     return nbad
 
@@ -321,7 +289,7 @@ def _offset(offs, k):
 
 
 @block
-def _shift_photons(sa, lp, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
+def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
     """The base gather point's photons cand[:n]: their base terms and their four shifts."""
     p, ng, frame, wi, mid, beta, state, m = gp
     ns, s, tt = frame
@@ -355,14 +323,14 @@ def _shift_photons(sa, lp, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
             c_o = (0.0, 0.0, 0.0)
             if o_ok[k]:
                 p2, ng2, fr2, wi2, mid2, beta2 = _offset(offs, k)
-                status, term, ratio = shift_photon(sa, lp, prm, v, (p, frame), (p2, ng2, fr2, wi2, sa.materials[mid2]),
+                status, term, ratio = shift_photon(sa, lp, mtab, prm, v, (p, frame), (p2, ng2, fr2, wi2, sa.materials[mid2]),
                                                    r, stack)
-            if status == RECONNECTED:
+            if status != FAILED:
                 c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
                 if not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
                     status = FAILED
             out.count[hh, status, y, x] += 1
-            if status != RECONNECTED:
+            if status == FAILED:
                 _put(out.phi, hh, 1 + k, y, x, c_b, -1.0)           # w = 1, no offset (Hua et al. Sec. 4.3)
                 continue
             wgt = mis_weight_from_log_ratio(math.log(ratio))        # Eq. 11: 1 / (1 + p'|J| / p)

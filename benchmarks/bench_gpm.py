@@ -1,0 +1,117 @@
+"""Gradient-domain photon mapping's costs and its equal-time standing: gpm vs sppm (vs pt).
+
+Default: per scene, JIT warmed, the passes of sppm and gpm *interleaved* (sppm, gpm, sppm, ...;
+both see the same load) and the median time of a pass of each, their ratio (Hua et al. 2017
+report 1.5-3.5x), the stage split, and gpm's photon-shift statistics (reconnected / failed /
+moved by the manifold walk, per gathered photon and shift).
+
+    .venv/bin/python benchmarks/bench_gpm.py [--scenes scenes/cornell-box.xml,...] [--res 128]
+        [--photons 200000] [--repeats 4]
+
+``--equal-time S``: sppm, gpm (its MIS primal), gpm+l1, gpm+l2 and pt for S seconds each (JIT
+excluded, reconstruction included) on every scene, ``--seeds`` seeds interleaved seed by seed,
+against Mitsuba 3's image (``--ref-spp`` spp over 8 seeds, llvm_ad_rgb, cached); prints each
+method's final relMSE per seed and the ratio sppm / method (> 1: lower error than SPPM), also with
+the reference's noise floor subtracted from both errors.
+
+    .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from gdlearn.integrators import make  # noqa: E402
+from gdlearn.scene.load import load  # noqa: E402
+
+SCENES = "scenes/cornell-box.xml,scenes/caustics-box.xml,scenes/caustic-closeup.xml"
+
+
+def pass_times(path, a) -> None:
+    scene = load(path, res=a.res)
+    integs = {n: make(n, scene, seed=0, photons_per_pass=a.photons, threads=a.threads) for n in ("sppm", "gpm")}
+    for integ in integs.values():
+        integ.compile()
+    times = {n: [] for n in integs}
+    last = {}
+    for i in range(a.repeats + 1):
+        for n, integ in integs.items():
+            t0 = time.perf_counter()
+            res = integ.render_pass(i)
+            if i > 0:                       # the first pass also measures the initial radii
+                times[n].append(time.perf_counter() - t0)
+            last[n] = res
+    med = {n: statistics.median(v) for n, v in times.items()}
+    st = last["gpm"].stats
+    ok, fail, mani = st["photon_shifts_reconnected"], st["photon_shifts_failed"], st["photon_shifts_manifold"]
+    tot = max(ok + fail + mani, 1)
+    stage = {k: last["gpm"].timings.get(k, 0.0) for k in ("photons", "build", "gather")}
+    print(f"{os.path.basename(path):22s} sppm {med['sppm']:6.3f} s/pass  gpm {med['gpm']:6.3f} s/pass  "
+          f"gpm/sppm {med['gpm'] / med['sppm']:5.2f}  (gpm: light paths {stage['photons']:.3f} s, build "
+          f"{stage['build']:.3f} s, gather {stage['gather']:.3f} s)  photon shifts: reconnected {ok / tot:.1%}, "
+          f"failed {fail / tot:.1%}, manifold {mani / tot:.1%}", flush=True)
+
+
+def equal_time_study(a) -> int:
+    import numpy as np
+
+    from gdlearn.experiments import SceneFile, equal_time
+    from gdlearn.experiments.references import mitsuba_reference
+    from gdlearn.experiments.study import Method
+
+    opts = (("photons_per_pass", a.photons), ("threads", a.threads))
+    methods = [Method("sppm", "sppm", None, opts), Method("gpm", "gpm", None, opts),
+               Method("gpm+l1", "gpm", "l1", opts), Method("gpm+l2", "gpm", "l2", opts), "pt"]
+    names = ["sppm", "gpm", "gpm+l1", "gpm+l2", "pt"]
+    print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
+          f"pass; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    for path in a.scenes.split(","):
+        sf = SceneFile(path, (("res", a.res),))
+        ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
+        print(f"\n{sf.name}: reference Mitsuba {ref.spp} spp, relMSE floor {ref.floor:.2e}", flush=True)
+        err = {m: [] for m in names}
+        for seed in range(a.seeds):
+            st = equal_time(methods, [sf], seconds=a.equal_time, seeds=[seed], references=ref, executor="serial",
+                            count=4)
+            for m in names:
+                err[m].append(st.select(True, method=m, seed=seed)[0]["relmse"])
+        base = np.array(err["sppm"])
+        for m in names:
+            e = np.array(err[m])
+            ratio = base / e
+            clean = np.maximum(base - ref.floor, 0) / np.maximum(e - ref.floor, 1e-300)
+            print(f"  {m:7s} relMSE {e.mean():.3e} (seeds: {', '.join(f'{x:.3e}' for x in e)})  sppm / {m}: mean "
+                  f"{ratio.mean():.2f}, min {ratio.min():.2f}, max {ratio.max():.2f}; less the floor: mean "
+                  f"{clean.mean():.2f}, min {clean.min():.2f}, max {clean.max():.2f}", flush=True)
+        print(f"  load average {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default=SCENES)
+    ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--photons", type=int, default=200_000, help="light paths per pass")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=4)
+    ap.add_argument("--equal-time", type=float, default=None, metavar="S")
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--ref-spp", type=int, default=16384)
+    a = ap.parse_args(argv)
+    if a.equal_time is not None:
+        return equal_time_study(a)
+    print(f"{a.res}x{a.res}, {a.photons} light paths a pass, {a.threads} threads, median of {a.repeats} passes after "
+          f"the first, interleaved; load average {os.getloadavg()[0]:.2f}")
+    for path in a.scenes.split(","):
+        pass_times(path, a)
+    print(f"load average {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
