@@ -174,3 +174,56 @@ def test_manifold_shifts_are_unbiased(caustic_runs):
             z = _z(d[:, i][:, where])
             assert (z ** 2).mean() < 1.45, f"{name}: mean z^2 {(z ** 2).mean():.2f} (max |z| {np.abs(z).max():.1f})"
             assert np.abs(z).max() < 5.5, name
+
+
+def test_mis_weights_of_a_pair_sum_to_one():
+    """PHOTONS.md T2/T4 on real light paths of the Cornell box: a photon y_s moved to y* = y_s + D in
+    its plane (the reconnection branch, y'_s = y*) and the reverse shift from y* back to y_s give
+    density ratios r and r' with r r' = 1, so w(x) + w(T x) = 1 to 1e-9, and power ratios that
+    invert; a shift that fails one way (the parent's hemisphere, an emitter's back) fails the other
+    way too. Random displacements up to a tenth of the box; parents on the light and on walls."""
+    from gdlearn.integrators.photon.gpm_light import parent_factor
+    from gdlearn.photons.records import K_SURFACE
+    from gdlearn.shifts.mis import mis_weight_from_log_ratio
+    from gdlearn.shifts.photon import photon_geometry_ratio
+
+    g = make("gpm", load("scenes/cornell-box.xml", res=8), photons_per_pass=100)
+    sa = g.setup.sa
+    lp = g.tracer.trace(7, 0, 0, 400)
+    rng = np.random.default_rng(5)
+    tested = {0: 0, 1: 0}
+    for v in np.flatnonzero((lp.depth >= 1) & (lp.kind == K_SURFACE) & (lp.parent >= 0)):
+        q = lp.parent[v]
+        nv = lp.nrm[v]
+        a = np.cross(nv, [0.3, 0.5, 0.7])
+        a /= np.linalg.norm(a)
+        b = np.cross(nv, a)
+        ys = lp.pos[v].copy()
+        ystar = ys + rng.uniform(-0.2, 0.2) * a + rng.uniform(-0.2, 0.2) * b
+        fwd = _ratio_one_way(sa, lp, q, v, ys, nv, ystar, parent_factor, photon_geometry_ratio)
+        lp2 = type(lp)(*(f.copy() for f in lp))
+        lp2.pos[v] = ystar
+        dv = ystar - lp.pos[q]
+        lp2.d_in[v] = dv / np.linalg.norm(dv)
+        rev = _ratio_one_way(sa, lp2, q, v, ystar, nv, ys, parent_factor, photon_geometry_ratio)
+        assert fwd[0] == rev[0], (v, fwd, rev)
+        if fwd[0] != 0:
+            continue
+        r, r2 = fwd[2], rev[2]
+        w = mis_weight_from_log_ratio(math.log(r)) + mis_weight_from_log_ratio(math.log(r2))
+        assert w == pytest.approx(1.0, abs=1e-9)
+        assert np.allclose(np.array(fwd[1]) * np.array(rev[1]), 1.0, rtol=1e-9)
+        tested[int(lp.kind[q] != 0)] += 1
+    assert tested[0] > 20 and tested[1] > 20, tested      # parents on the light and on surfaces
+
+
+def _ratio_one_way(sa, lp, q, v, ys, nv, ystar, parent_factor, photon_geometry_ratio):
+    """(status, power ratio, density ratio) of moving photon v from ys to ystar (normal nv)."""
+    yq = lp.pos[q]
+    d = ystar - yq
+    d /= np.linalg.norm(d)
+    status, fr, pr, _ = parent_factor(sa, lp, q, v, tuple(d))
+    if status != 0:
+        return status, fr, 0.0
+    geo = photon_geometry_ratio(tuple(yq), tuple(ys), tuple(nv), tuple(ystar), tuple(nv))
+    return status, tuple(f * geo for f in fr), pr * geo

@@ -53,13 +53,25 @@ POS_TOL = 1e-7
 
 
 @block
+def _dir(a, b):
+    d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+    n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    if not n > 0.0:
+        return (0.0, 0.0, 0.0), 0.0
+    return (d[0] / n, d[1] / n, d[2] / n), n
+
+
+@block
 def parent_factor(sa, lp, q, v, d_new):
     """The parent y_{s-1} = row q re-evaluated towards ``d_new`` (reconnection): returns (status,
     (f'/f per channel), p_w(w') / p_w(w), ray origin). status 0: ok, 1: fails, 2: needs the manifold
     walk (a specular parent)."""
     one = (1.0, 1.0, 1.0)
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    d_b = (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+    # the base direction from the positions, not the stored ray direction (which left from an origin
+    # pushed off the surface): the reverse shift computes its direction the same way, so the two
+    # density ratios are exact reciprocals and the MIS weights of a pair sum to one (1e-16, not 1e-8)
+    d_b, _ = _dir(yq, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
     nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
     if lp.kind[q] == K_EMITTER:
         fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
@@ -121,15 +133,6 @@ def chain_rows(sa, lp, mtab, q, rows):
     if k == 0 or u < 0:
         return 0, -1
     return k, u
-
-
-@block
-def _dir(a, b):
-    d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-    n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    if not n > 0.0:
-        return (0.0, 0.0, 0.0), 0.0
-    return (d[0] / n, d[1] / n, d[2] / n), n
 
 
 @block
