@@ -157,3 +157,42 @@ def test_bre_kernel_with_a_planted_bug_is_caught(tmp_path, bug):
     assert hint in out, out
     assert not any("0 unless 0 < t < s" in line for line in failed), out
     assert len(failed) == len(failing), out
+
+
+#: the classic slips of the offset-photon exercise: Eq. 5 copied in world space (y* = z' + (y - z),
+#: right on one flat surface, wrong wherever the frames turn), Eq. 6 upside down, and Eq. 6 with the
+#: hit's normal at y* as well (cos' for cos*)
+_OFFSET_SOLUTION = (SOLUTIONS_DIR / "offset_photon.py").read_text()
+OFFSET_BUGS = {
+    "copied in world space": (
+        _OFFSET_SOLUTION.replace("return tuple(z_o[k] + a * s_o[k] + b * t_o[k] + c * n_o[k] for k in range(3))",
+                                 "return tuple(z_o[k] + r[k] for k in range(3))"),
+        ["the coordinates that y - z has in the base frame", "lands in the offset's tangent plane",
+         "(gdlearn.shifts.photon.offset_target)"], "copied in world space"),
+    "Eq. 6 upside down": (
+        _OFFSET_SOLUTION.replace("return (cos_star / da) / (cos_hit / db)", "return (cos_hit / db) / (cos_star / da)"),
+        ["by hand -- y' twice as far", "onto a sphere", "onto a tilted plane",
+         "(gdlearn.shifts.photon.projection_jacobian)"], "upside down"),
+    "cos' for cos*": (
+        _OFFSET_SOLUTION.replace("cos_star = abs(_dot(n_star, a))", "cos_star = abs(_dot(n_hit, a))"),
+        ["onto a sphere", "onto a tilted plane", "(gdlearn.shifts.photon.projection_jacobian)"],
+        "cos* belongs to n*"),
+}
+
+
+@pytest.mark.parametrize("bug", sorted(OFFSET_BUGS))
+def test_offset_photon_with_a_planted_bug_is_caught(tmp_path, bug):
+    """An offset photon copied in world space instead of through the frames, or a projection
+    Jacobian upside down or with the wrong normal at y*: the checks must fail the tests that see it
+    (saying which slip it is), and pass the others (shifting back undoes a world-space copy too, and
+    the degenerate cases are still right)."""
+    source, failing, hint = OFFSET_BUGS[bug]
+    assert source != _OFFSET_SOLUTION, "the planted bug no longer matches the solution's text"
+    rc, out = check_exercise_source(tmp_path, "offset-photon", source)
+    assert rc == 1, out
+    failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
+    for label in failing:
+        assert any(label in line for line in failed), (label, out)
+    assert hint in out, out
+    assert not any("shifted back from z' to z" in line or "never NaN" in line for line in failed), out
+    assert len(failed) == len(failing), out
