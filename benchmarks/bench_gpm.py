@@ -65,9 +65,10 @@ def equal_time_study(a) -> int:
     from gdlearn.experiments.study import Method
 
     opts = (("photons_per_pass", a.photons), ("threads", a.threads))
-    methods = [Method("sppm", "sppm", None, opts), Method("gpm", "gpm", None, opts),
-               Method("gpm+l1", "gpm", "l1", opts), Method("gpm+l2", "gpm", "l2", opts), "pt"]
-    names = ["sppm", "gpm", "gpm+l1", "gpm+l2", "pt"]
+    every = {"sppm": Method("sppm", "sppm", None, opts), "gpm": Method("gpm", "gpm", None, opts),
+             "gpm+l1": Method("gpm+l1", "gpm", "l1", opts), "gpm+l2": Method("gpm+l2", "gpm", "l2", opts), "pt": "pt"}
+    names = a.methods.split(",")
+    methods = [every[n] for n in names]
     print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
           f"pass; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     for path in a.scenes.split(","):
@@ -102,6 +103,7 @@ def main(argv=None) -> int:
     ap.add_argument("--equal-time", type=float, default=None, metavar="S")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--ref-spp", type=int, default=16384)
+    ap.add_argument("--methods", default="sppm,gpm,gpm+l1,gpm+l2,pt", help="of --equal-time; sppm first (the ratios' base)")
     a = ap.parse_args(argv)
     if a.equal_time is not None:
         return equal_time_study(a)

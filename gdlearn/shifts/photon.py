@@ -7,16 +7,20 @@ photon follows it:
 * **Eq. 5**, the offset photon's target: the photon's position relative to the gather point,
   copied in the local tangent frames, ``y*_s = z'_t + M' M^-1 (y_s - z_t)`` (M, M' the shading
   frames at z_t and z'_t, :func:`offset_target`). The frames are Duff et al. 2017's branchless ones
-  (:func:`gdlearn.kernels.vec.coordinate_system`): continuous in the normal, so neighbouring pixels
-  on one surface get the same frame and y* is y_s translated by z'_t - z_t.
+  (:func:`gdlearn.kernels.vec.coordinate_system`): continuous in the normal except where its z
+  component changes sign, so neighbouring pixels on one flat surface get the same frame and y* is
+  y_s translated by z'_t - z_t (across that seam the frames differ by a flip: less correlation, no
+  bias).
 * **Projection**: y'_s is the first surface the ray from y_{s-1} through y*_s hits (the caller
   traces it). The map y* -> y'_s keeps the direction from y_{s-1}, so it preserves solid angle
   there and (Eq. 6)
 
       |dy'_s / dy_s| = G(y_{s-1}, y*_s) / G(y_{s-1}, y'_s) = (cos*_ / d*^2) / (cos'_ / d'^2),
 
-  cos* taken with the offset gather point's normal (y* lies in its tangent plane) and cos' with
-  the hit's normal; the cosine at y_{s-1} is common to both and cancels (:func:`projection_jacobian`).
+  cos* taken with the normal of y*'s plane -- the photon's own normal carried by the rigid map of
+  Eq. 5 (the reference code takes the offset gather point's, the same for a photon on the gather
+  point's plane) -- and cos' with the hit's normal; the cosine at y_{s-1} is common to both and
+  cancels (:func:`projection_jacobian`).
   PHOTONS.md Sec. 2.4 notes the reference code drops this factor in its reconnection branch;
   here it is applied in every branch.
 * **Reconnection** (Eq. 6 alone; the light subpath is completed by y_{s-1} -> y'_s when y_{s-1}

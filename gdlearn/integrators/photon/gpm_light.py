@@ -25,7 +25,8 @@ a null interface, an emitter, a non-delta specular lobe or a dielectric (mirrors
 see :func:`chain_rows`); a walk that does not converge or walks
 back to another chain (near caustics several chains join the same endpoints); an offset chain
 that is occluded or leaves its shapes; an offset photon its own parent does not see back to y_s
-(the paper's reversibility check).
+(the paper's reversibility check), or one the projection moved off y* (its inverse shift, from the
+offset's own parent, would not return y_s).
 """
 from __future__ import annotations
 
@@ -196,6 +197,12 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
         return False, zero, 0.0, zero
     e = (yh[0] - p2[0], yh[1] - p2[1], yh[2] - p2[2])
     if not e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r:
+        return False, zero, 0.0, zero
+    # the photon's own inverse shift must give y_s back: with the projection from the *offset's*
+    # parent that holds only when the projection did not move y* (y'_s = y*: Eq. 5 inverts exactly)
+    ex, ey, ez = yh[0] - ystar[0], yh[1] - ystar[1], yh[2] - ystar[2]
+    push = 1e-9 * max(abs(yq[0]), max(abs(yq[1]), abs(yq[2]))) + 1e-7
+    if not math.sqrt(ex * ex + ey * ey + ez * ez) <= 1e-6 * r + 100.0 * push:
         return False, zero, 0.0, zero
     j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
     # the chain from y_b's side: X[0] = y_{b+1} .. X[k-1] = y_{s-1}
