@@ -102,15 +102,6 @@ def emission_profile(emitters, em, n0, d):
 @block
 def photon_geometry_ratio(y_parent, y_base, n_base, y_star, n_star):
     """``(|cos*| / d*^2) / (|cos_s| / d^2)``: the factor the offset photon's power and the light side
-    of the MIS ratio share (module docstring); 0 if degenerate."""
-    a = vec.sub(y_star, y_parent)
-    b = vec.sub(y_base, y_parent)
-    da = vec.dot(a, a)
-    db = vec.dot(b, b)
-    if not (da > 0.0 and db > 0.0):
-        return 0.0
-    ca = abs_cos(n_star, vec.scale(a, 1.0 / math.sqrt(da)))
-    cb = abs_cos(n_base, vec.scale(b, 1.0 / math.sqrt(db)))
-    if not cb > 0.0:
-        return 0.0
-    return (ca / da) / (cb / db)
+    of the MIS ratio share (module docstring); 0 if degenerate. It is Eq. 6's ratio with the roles
+    of the two points exchanged (y* in place of the projection, the base photon in place of y*)."""
+    return projection_jacobian(y_parent, y_star, n_star, y_base, n_base)
