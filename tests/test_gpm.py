@@ -222,7 +222,7 @@ def _ratio_one_way(sa, lp, q, v, ys, nv, ystar, parent_factor, photon_geometry_r
     yq = lp.pos[q]
     d = ystar - yq
     d /= np.linalg.norm(d)
-    status, fr, pr, _ = parent_factor(sa, lp, q, v, tuple(d))
+    status, fr, pr = parent_factor(sa, lp, q, v, tuple(d))
     if status != 0:
         return status, fr, 0.0
     geo = photon_geometry_ratio(tuple(yq), tuple(ys), tuple(nv), tuple(ystar), tuple(nv))

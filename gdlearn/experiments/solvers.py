@@ -71,9 +71,9 @@ class _Bound:
         if kept is not None:
             # the estimator split off a part it estimates well by itself (the emission its camera
             # paths see, sampled exactly): the solver reconstructs the rest, the part is added back
-            primal, gx, gy = primal - kept, gx - frame.images["emission_gx"], gy - frame.images["emission_gy"]
-            halves = {n: tuple(a - b for a, b in zip(halves[n], halves[f"emission{'_' + n if n != 'primal' else ''}"]))
-                      for n in ("primal", "gx", "gy")}
+            part = {"primal": "emission", "gx": "emission_gx", "gy": "emission_gy"}
+            primal, gx, gy = (frame.images[n] - frame.images[part[n]] for n in ("primal", "gx", "gy"))
+            halves = {n: (halves[n][0] - halves[e][0], halves[n][1] - halves[e][1]) for n, e in part.items()}
         if self.weighted and "halves" in params:
             # the solver estimates (and pools) the variances from the two half-buffers itself
             kwargs.setdefault("halves", {n: halves[n] for n in ("primal", "gx", "gy")})

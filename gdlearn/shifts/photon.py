@@ -48,13 +48,18 @@ from gdlearn.shifts.path import abs_cos
 
 
 @block
-def offset_target(y, z, frame, z_o, frame_o):
-    """Eq. 5: ``y* = z' + M' M^-1 (y - z)`` with frames ``(n, s, t)`` at z and z' (world vectors)."""
+def rotate(v, frame, frame_o):
+    """``M' M^-1 v``: a vector carried from the frame ``(n, s, t)`` at z to the one at z' (Eq. 5's
+    rotation; the photon's normal goes with it to y*)."""
     n, s, t = frame
     no, so, to = frame_o
-    r = (y[0] - z[0], y[1] - z[1], y[2] - z[2])
-    loc = vec.to_local(r, s, t, n)
-    w = vec.to_world(loc, so, to, no)
+    return vec.to_world(vec.to_local(v, s, t, n), so, to, no)
+
+
+@block
+def offset_target(y, z, frame, z_o, frame_o):
+    """Eq. 5: ``y* = z' + M' M^-1 (y - z)`` with frames ``(n, s, t)`` at z and z' (world vectors)."""
+    w = rotate((y[0] - z[0], y[1] - z[1], y[2] - z[2]), frame, frame_o)
     return (z_o[0] + w[0], z_o[1] + w[1], z_o[2] + w[2])
 
 

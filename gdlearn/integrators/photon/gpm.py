@@ -94,11 +94,10 @@ class GPM(SurfacePhotonMapper):
         k = pass_index + 1
         halves = {name: [] for name in ("primal", "primal_base", "gx", "gy", "emission", "emission_gx", "emission_gy")}
         for dens, emis in zip(self.D / (self.n_half * k), self.E / k):        # per half: (9, H, W, 3)
-            for prefix, b in (("", dens + emis), ("emission_", emis)):
+            for names, b in ((("primal", "gx", "gy"), dens + emis), (("emission", "emission_gx", "emission_gy"), emis)):
                 gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # MIS weights are inside the buffers
-                halves[prefix + "gx"].append(gx)
-                halves[prefix + "gy"].append(gy)
-                halves[prefix + "primal" if not prefix else "emission"].append(mis_primal(b))
+                for name, img in zip(names, (mis_primal(b), gx, gy)):
+                    halves[name].append(img)
             halves["primal_base"].append(dens[0] + emis[0])
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         images["shift_reconnected"] = self.counts[RECONNECTED].copy()

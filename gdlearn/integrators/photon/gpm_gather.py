@@ -37,21 +37,20 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from gdlearn.kernels import layout as L
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.arrays import borrow, borrowed
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval, vertex_class
+from gdlearn.kernels.bsdf.dispatch import bsdf_eval
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
+from gdlearn.kernels.geometry import offset_origin
 from gdlearn.kernels.jit import block, rows
 from gdlearn.kernels.rng import path_state, rand_at
-from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
+from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, pixel_angle
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.integrators.photon.gpm_light import manifold_photon, parent_factor
-from gdlearn.shifts.photon import offset_target, photon_geometry_ratio
+from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, parent_factor, project, same_point
+from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 
 #: outcome counters of the photon shifts (GpmOut.count[:, i]): reconnected, failed, moved by the manifold walk
@@ -86,105 +85,63 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     ystar = offset_target(ys, p, frame, p2, frame2)                        # Eq. 5
-    dv = (ystar[0] - yq[0], ystar[1] - yq[1], ystar[2] - yq[2])
-    dl = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
-    if not dl > 0.0:
-        return FAILED, zero, 0.0
-    d = (dv[0] / dl, dv[1] / dl, dv[2] / dl)
-    status, fr, pr, o = parent_factor(sa, lp, q, v, d)
-    if status == 2:                                                        # a specular parent
-        nv = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
-        ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, rotate(nv, frame, frame2), r, p2,
-                                                stack)
-        if not ok:
-            return FAILED, zero, 0.0
-        wo_w = (-w_arr[0], -w_arr[1], -w_arr[2])
-        cg = abs(dot(wo_w, ng2))
-        if not cg > 1e-9:
-            return FAILED, zero, 0.0
-        ns2, s2, t2 = frame2
-        f = bsdf_eval(mat2, wi2, to_local(wo_w, s2, t2, ns2))
-        return MANIFOLD, (f[0] * lp.beta[v, 0] * ratio3[0] / cg, f[1] * lp.beta[v, 1] * ratio3[1] / cg,
-                          f[2] * lp.beta[v, 2] * ratio3[2] / cg), pp
-    if status != 0:
-        return FAILED, zero, 0.0
-    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
-    if prim < 0:
-        return FAILED, zero, 0.0
-    yh, ngh, nsh = surface(sa.prims, sa.prim_info, prim, o, d, t, u, w)    # the projection y'_s
-    if vertex_class(sa.materials[sa.prim_info[prim, INFO_MAT]], prm.threshold) == L.V_SPECULAR:
-        return FAILED, zero, 0.0                                          # no photon is stored there
-    dx, dy, dz = yh[0] - p2[0], yh[1] - p2[1], yh[2] - p2[2]
-    if not dx * dx + dy * dy + dz * dz < r * r:                            # outside the kernel (Sec. 2.6)
-        return FAILED, zero, 0.0
-    if not _reversible(sa, lp, q, o, ys, yh, ystar, p, frame, p2, frame2, r, stack):
-        return FAILED, zero, 0.0
     # y* lies on the photon's tangent plane carried by the rigid map of Eq. 5: its normal is the
     # photon's, rotated (the offset gather point's normal, the reference code's choice, is the same
     # for a photon on the gather point's own plane and wrong for one on a neighbouring surface)
     nv = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
     nstar = rotate(nv, frame, frame2)
+    d, dl = _dir(yq, ystar)
+    if not dl > 0.0:
+        return FAILED, zero, 0.0
+    status, fr, pr = parent_factor(sa, lp, q, v, d)
+    if status == 2:                                                        # a specular parent
+        ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
+        return _at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
+    if status != 0:
+        return FAILED, zero, 0.0
+    ok, _, yh, _ = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)
+    if not (ok and _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack)):
+        return FAILED, zero, 0.0
     geo = photon_geometry_ratio(yq, ys, nv, ystar, nstar)
-    wo_w = (-d[0], -d[1], -d[2])
+    if not geo > 0.0:
+        return FAILED, zero, 0.0
+    return _at_offset(RECONNECTED, lp, v, (fr[0] * geo, fr[1] * geo, fr[2] * geo), pr * geo, d, off)
+
+
+@block
+def _at_offset(status, lp, v, ratio3, ratio, w_arr, off):
+    """(status, term, ratio): the offset photon, of power beta_v x ratio3 arriving along w_arr, as
+    the offset gather point sees it (the base estimate's f Phi / |cos_g|, gather.density)."""
+    zero = (0.0, 0.0, 0.0)
+    if status == FAILED:
+        return FAILED, zero, 0.0
+    p2, ng2, frame2, wi2, mat2 = off
+    wo_w = (-w_arr[0], -w_arr[1], -w_arr[2])
     cg = abs(dot(wo_w, ng2))
-    if not (geo > 0.0 and cg > 1e-9):
+    if not cg > 1e-9:
         return FAILED, zero, 0.0
     ns2, s2, t2 = frame2
     f = bsdf_eval(mat2, wi2, to_local(wo_w, s2, t2, ns2))
-    k = geo / cg
-    term = (f[0] * lp.beta[v, 0] * fr[0] * k, f[1] * lp.beta[v, 1] * fr[1] * k, f[2] * lp.beta[v, 2] * fr[2] * k)
-    return RECONNECTED, term, pr * geo
+    return status, (f[0] * lp.beta[v, 0] * ratio3[0] / cg, f[1] * lp.beta[v, 1] * ratio3[1] / cg,
+                    f[2] * lp.beta[v, 2] * ratio3[2] / cg), ratio
 
 
 @block
-def rotate(n, frame, frame_o):
-    """M' M^-1 n: a direction carried from the base gather point's frame to the offset's (Eq. 5)."""
-    a, b, c = frame
-    ao, bo, co = frame_o
-    loc = to_local(n, b, c, a)
-    return to_world(loc, bo, co, ao)
-
-
-#: y'_s counts as y*_s (no projection happened) within this fraction of the kernel radius (plus the
-#: rounding of spawned rays, :func:`_tolerance`)
-SAME_POINT = 1e-6
-
-
-@block
-def _reversible(sa, lp, q, o, ys, yh, ystar, p, frame, p2, frame2, r, stack):
+def _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack):
     """Does the inverse shift take the offset photon y'_s back to y_s (Hua et al. 2017 Sec. 4.3)?
     When the projection did not move y* (y'_s = y*_s, a photon on a plane the shift slides along)
     Eq. 5 inverts exactly; otherwise the inverse target is projected from the parent and must land
     on y_s. Without this the two MIS weights of a path pair need not sum to one (a photon near a
     corner, whose y* falls off its surface, projects onto the next one)."""
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    tol = _tolerance(yq, r)
-    ex, ey, ez = yh[0] - ystar[0], yh[1] - ystar[1], yh[2] - ystar[2]
-    if ex * ex + ey * ey + ez * ez <= tol * tol:
+    if same_point(yh, ystar, yq, r):
         return True
-    yback = offset_target(yh, p2, frame2, p, frame)
-    dv = (yback[0] - yq[0], yback[1] - yq[1], yback[2] - yq[2])
-    dl = math.sqrt(dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2])
+    d, dl = _dir(yq, offset_target(yh, p2, frame2, p, frame))
     if not dl > 0.0:
         return False
-    d = (dv[0] / dl, dv[1] / dl, dv[2] / dl)
-    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
-    o2 = offset_origin(yq, nq, d) if (nq[0] != 0.0 or nq[1] != 0.0 or nq[2] != 0.0) else yq
-    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o2, d, 0.0, math.inf, stack)
-    if prim < 0:
-        return False
-    hit = (o2[0] + t * d[0], o2[1] + t * d[1], o2[2] + t * d[2])
-    fx, fy, fz = hit[0] - ys[0], hit[1] - ys[1], hit[2] - ys[2]
-    return fx * fx + fy * fy + fz * fz <= tol * tol
-
-
-@block
-def _tolerance(yq, r):
-    """How far two hits of rays from the parent may lie apart and count as one point: a millionth of
-    the kernel radius plus 100 x the push of a spawned ray's origin (geometry.offset_origin: the
-    ray starts that far off the surface, so its hit moves by about that over the cosine)."""
-    push = 1e-9 * max(abs(yq[0]), max(abs(yq[1]), abs(yq[2]))) + 1e-7
-    return SAME_POINT * r + 100.0 * push
+    o = offset_origin(yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), d)
+    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
+    return prim >= 0 and same_point((o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]), ys, yq, r)
 
 
 @block

@@ -42,15 +42,13 @@ from gdlearn.kernels.jit import block
 from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.photons.trace import _adjoint_weight
-from gdlearn.integrators.path.gpt_surface.manifold import _same_row
+from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row, _segment_reaches
 from gdlearn.integrators.path.gpt_surface.vertex import same_delta_lobe
 from gdlearn.shifts.photon import emission_profile
 from gdlearn.shifts import manifold as M
 from gdlearn.shifts.photon import projection_jacobian
 from gdlearn.shifts.policy import MAX_CHAIN
 
-#: offset positions found by ray tracing agree with the walk's to this relative tolerance
-POS_TOL = 1e-7
 
 
 @block
@@ -65,8 +63,8 @@ def _dir(a, b):
 @block
 def parent_factor(sa, lp, q, v, d_new):
     """The parent y_{s-1} = row q re-evaluated towards ``d_new`` (reconnection): returns (status,
-    (f'/f per channel), p_w(w') / p_w(w), ray origin). status 0: ok, 1: fails, 2: needs the manifold
-    walk (a specular parent)."""
+    (f'/f per channel), p_w(w') / p_w(w)). status 0: ok, 1: fails, 2: needs the manifold walk (a
+    specular parent)."""
     one = (1.0, 1.0, 1.0)
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     # the base direction from the positions, not the stored ray direction (which left from an origin
@@ -78,16 +76,15 @@ def parent_factor(sa, lp, q, v, d_new):
         fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
         fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
         if not (fb > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
-            return 1, one, 0.0, yq
-        o = offset_origin(yq, nq, d_new) if lp.prim[q] >= 0 else yq
+            return 1, one, 0.0
         r = fo / fb
-        return 0, (r, r, r), po / pb, o
+        return 0, (r, r, r), po / pb
     if lp.kind[q] != K_SURFACE:
-        return 1, one, 0.0, yq
+        return 1, one, 0.0
     if (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY):
-        return 2, one, 0.0, yq
+        return 2, one, 0.0
     if not dot(d_b, nq) * dot(d_new, nq) > 0.0:            # the offset must leave on the base's side
-        return 1, one, 0.0, yq
+        return 1, one, 0.0
     mat = sa.materials[lp.obj[q]]
     ns = (lp.nsh[q, 0], lp.nsh[q, 1], lp.nsh[q, 2])
     s, t = coordinate_system(ns)
@@ -100,12 +97,12 @@ def parent_factor(sa, lp, q, v, d_new):
     pb = bsdf_pdf(mat, wi, wb)
     po = bsdf_pdf(mat, wi, wo)
     if not (pb > 0.0 and po > 0.0):
-        return 1, one, 0.0, yq
+        return 1, one, 0.0
     for c in range(3):
         if (fb[c] > 0.0) != (fo[c] > 0.0):                 # a channel only one side carries: refuse both ways
-            return 1, one, 0.0, yq
+            return 1, one, 0.0
     r = (_ratio(fo[0], fb[0]), _ratio(fo[1], fb[1]), _ratio(fo[2], fb[2]))
-    return 0, r, po / pb, offset_origin(yq, nq, d_new)
+    return 0, r, po / pb
 
 
 @block
@@ -136,22 +133,42 @@ def chain_rows(sa, lp, mtab, q, rows):
     return k, u
 
 
+#: y'_s counts as y*_s (no projection happened) within this fraction of the kernel radius (plus the
+#: rounding of spawned rays, :func:`same_point`)
+SAME_POINT = 1e-6
+
+
 @block
-def _reaches(sa, a, n_a, b, stack):
-    """The first hit of the ray from a (normal n_a, zero for a point) towards b is b: (ok, prim, ng, ns)."""
-    d, ln = _dir(a, b)
+def same_point(a, b, yq, r):
+    """Do two hits of rays from the light vertex yq count as one point? Within a millionth of the
+    kernel radius r plus 100 x the push of a spawned ray's origin (geometry.offset_origin: the ray
+    starts that far off the surface, so its hit moves by about that over the cosine)."""
+    push = 1e-9 * max(abs(yq[0]), max(abs(yq[1]), abs(yq[2]))) + 1e-7
+    tol = SAME_POINT * r + 100.0 * push
+    e = (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+    return e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= tol * tol
+
+
+@block
+def project(sa, prm, yq, nq, ystar, p2, r, stack):
+    """Eq. 6's projection: the first surface the ray from the light vertex yq (normal nq) through y*
+    hits, which must hold a photon (not specular) and lie in the offset gather point p2's kernel of
+    radius r (PHOTONS.md Sec. 2.6). Returns (ok, direction, y'_s, its geometric normal)."""
     zero = (0.0, 0.0, 0.0)
-    if not ln > 0.0:
-        return False, -1, zero, zero
-    o = offset_origin(a, n_a, d) if (n_a[0] != 0.0 or n_a[1] != 0.0 or n_a[2] != 0.0) else a
-    t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
+    d, dl = _dir(yq, ystar)
+    if not dl > 0.0:
+        return False, d, zero, zero
+    o = offset_origin(yq, nq, d)          # a point light's zero normal leaves the origin in place
+    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
     if prim < 0:
-        return False, -1, zero, zero
-    p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
-    e = (p[0] - b[0], p[1] - b[1], p[2] - b[2])
-    if not math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) <= POS_TOL * (1.0 + ln):
-        return False, -1, zero, zero
-    return True, prim, ng, ns
+        return False, d, zero, zero
+    yh, ngh, _ = surface(sa.prims, sa.prim_info, prim, o, d, t, u, w)
+    if vertex_class(sa.materials[sa.prim_info[prim, INFO_MAT]], prm.threshold) == L.V_SPECULAR:
+        return False, d, zero, zero                                       # no photon is stored there
+    e = (yh[0] - p2[0], yh[1] - p2[1], yh[2] - p2[2])
+    if not e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r:
+        return False, d, zero, zero
+    return True, d, yh, ngh
 
 
 @block
@@ -164,7 +181,7 @@ def _delta_value(mat, ns, w_in, w_out_world, refl):
     if not ok:
         return (0.0, 0.0, 0.0), 0.0, False
     wl = to_local(w_out_world, s, t, ns)
-    if not abs(wo[0] - wl[0]) + abs(wo[1] - wl[1]) + abs(wo[2] - wl[2]) <= 1e3 * POS_TOL:
+    if not abs(wo[0] - wl[0]) + abs(wo[1] - wl[1]) + abs(wo[2] - wl[2]) <= 1e3 * POS_TOL:   # as gpt's manifold
         return (0.0, 0.0, 0.0), 0.0, False
     return (wt[0] * pdf, wt[1] * pdf, wt[2] * pdf), pdf, True
 
@@ -184,25 +201,10 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     ns_v = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
     # the projection of y* from the base parent (Eq. 6)
-    d, dl = _dir(yq, ystar)
-    if not dl > 0.0:
-        return False, zero, 0.0, zero
-    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
-    o = offset_origin(yq, nq, d)
-    t, prim, u, w = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, math.inf, stack)
-    if prim < 0:
-        return False, zero, 0.0, zero
-    yh, ngh, nsh = surface(sa.prims, sa.prim_info, prim, o, d, t, u, w)
-    if vertex_class(sa.materials[sa.prim_info[prim, INFO_MAT]], prm.threshold) == L.V_SPECULAR:
-        return False, zero, 0.0, zero
-    e = (yh[0] - p2[0], yh[1] - p2[1], yh[2] - p2[2])
-    if not e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r:
-        return False, zero, 0.0, zero
+    ok, _, yh, ngh = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)
     # the photon's own inverse shift must give y_s back: with the projection from the *offset's*
     # parent that holds only when the projection did not move y* (y'_s = y*: Eq. 5 inverts exactly)
-    ex, ey, ez = yh[0] - ystar[0], yh[1] - ystar[1], yh[2] - ystar[2]
-    push = 1e-9 * max(abs(yq[0]), max(abs(yq[1]), abs(yq[2]))) + 1e-7
-    if not math.sqrt(ex * ex + ey * ey + ez * ez) <= 1e-6 * r + 100.0 * push:
+    if not (ok and same_point(yh, ystar, yq, r)):
         return False, zero, 0.0, zero
     j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
     # the chain from y_b's side: X[0] = y_{b+1} .. X[k-1] = y_{s-1}
@@ -249,7 +251,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     nrm_o = np.empty((k, 6))                        # the offset chain's geometric and shading normals
     for j in range(k + 1):
         bj = (Xo[j, 0], Xo[j, 1], Xo[j, 2]) if j < k else yh
-        good, pj, ngj, nsj = _reaches(sa, a, n_a, bj, stack)
+        good, pj, ngj, nsj, _ = _segment_reaches(sa, a, n_a, bj, stack)
         if not good:
             return False, zero, 0.0, zero
         if j < k:
@@ -260,7 +262,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
         a, n_a = bj, ngj
     # reversibility (Hua et al. 2017 Sec. 4.3): the offset's own parent must see the base photon
     last = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
-    if not _reaches(sa, last, (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2]), ys, stack)[0]:
+    if not _segment_reaches(sa, last, (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2]), ys, stack)[0]:
         return False, zero, 0.0, zero
     # J in the solid angle at y_b
     x1 = (X[0, 0], X[0, 1], X[0, 2])
@@ -273,7 +275,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     if not (c1 > 0.0 and c1o > 0.0):
         return False, zero, 0.0, zero
     j_w = j_area * (c1o / (l1o * l1o)) / (c1 / (l1 * l1))
-    status, fr, pr, _ = parent_factor(sa, lp, b, rows[k - 1], d1o)
+    status, fr, pr = parent_factor(sa, lp, b, rows[k - 1], d1o)
     if status != 0:
         return False, zero, 0.0, zero
     # the chain's delta lobes at the offset's angles against the base's
