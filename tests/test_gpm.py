@@ -176,6 +176,19 @@ def test_manifold_shifts_are_unbiased(caustic_runs):
             assert np.abs(z).max() < 5.5, name
 
 
+def test_specular_parent_subset_goes_to_the_manifold_branch_only():
+    """Hua et al. 2017's Fig. 4 subset (parent="specular"): the base is SPPM's estimate of the same
+    subset, and no photon of it is reconnected -- every shift is the manifold walk's or fails --
+    while the complement never walks."""
+    scene = load("scenes/caustics-box.xml", res=8)
+    kw = dict(seed=4, photons_per_pass=20_000, radius=0.08, alpha=1.0)
+    spec = render(make("gpm", scene, parent="specular", **kw), spp=2)
+    assert np.array_equal(spec.images["primal_base"], render(make("sppm", scene, parent="specular", **kw), spp=2).primal)
+    assert spec.stats["photon_shifts_reconnected"] == 0 and spec.stats["photon_shifts_manifold"] > 0
+    rest = render(make("gpm", scene, parent="non-specular", **kw), spp=2)
+    assert rest.stats["photon_shifts_manifold"] == 0 and rest.stats["photon_shifts_reconnected"] > 0
+
+
 def test_mis_weights_of_a_pair_sum_to_one():
     """PHOTONS.md T2/T4 on real light paths of the Cornell box: a photon y_s moved to y* = y_s + D in
     its plane (the reconnection branch, y'_s = y*) and the reverse shift from y* back to y_s give

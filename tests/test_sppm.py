@@ -88,6 +88,24 @@ def test_effects_partition_the_image_and_prune_the_light_paths():
     assert direct.stats["light_vertices"] <= 2 * 20_000
 
 
+def test_parent_subsets_partition_the_image_and_the_specular_one_is_the_first_bounce_caustic():
+    """parent="specular" plus parent="non-specular" is the whole photon image, term for term; and
+    with paths of at most 3 segments the only photon with a specular parent is the caustic
+    L S D (E), so the specular subset must equal the pathclass machinery's "caustics" class (an
+    independent classification: the light path's lobe history, not the parent test)."""
+    sc = _scene("caustics-box.xml", 8)
+    kw = dict(seed=6, photons_per_pass=20_000, radius_scale=2.0, effects=NO_EMISSION)
+    img = {p: render(make("sppm", sc, parent=p, **kw), passes=1).primal for p in ("any", "specular", "non-specular")}
+    np.testing.assert_allclose(img["specular"] + img["non-specular"], img["any"], rtol=1e-9, atol=1e-12)
+    assert img["specular"].sum() > 0.02 * img["any"].sum()
+    spec3 = render(make("sppm", sc, parent="specular", max_depth=3, **kw), passes=1).primal
+    caus3 = render(make("sppm", sc, max_depth=3, **{**kw, "effects": ["caustics"]}), passes=1).primal
+    assert caus3.sum() > 0
+    np.testing.assert_allclose(spec3, caus3, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="non-specular"):
+        make("sppm", sc, parent="mirror")
+
+
 def test_scenes_with_media_are_refused_naming_the_volumetric_estimators():
     with pytest.raises(ValueError, match="vpm"):
         make("sppm", _scene("fog-box.xml", 8))

@@ -48,6 +48,7 @@ from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
 from gdlearn.kernels.arrays import borrow
 from gdlearn.photons.grid import HashGrid, bucket, cell_of
+from gdlearn.photons.records import F_DELTA_OUT, K_SURFACE
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.kernels.jit import block, inlined, rows
@@ -59,6 +60,7 @@ class GatherParams(NamedTuple):
     mask: int             # effect classes to keep
     filter_classes: bool  # does the mask exclude some photon-path class (walk the light vertices)?
     nee: bool = False     # direct light at the gather point by emitter sampling, not by photons
+    parents: int = 0      # photon subset by parent vertex: 0 all, 1 specular parents only, 2 all others
 
 
 class GatherOut(NamedTuple):
@@ -167,6 +169,25 @@ def direct(sa, p, ng, frame, wi, mat, h, stack):
 
 
 @block
+def specular_vertex(lp, q):
+    """Did surface row ``q`` leave by a specular lobe (delta, or a microfacet below the roughness
+    threshold)? Such a parent is what sends GPM's shift to the manifold branch."""
+    return (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY)
+
+
+@block
+def parent_ok(lp, v, prm):
+    """Is photon row ``v`` in the gathered subset ``prm.parents``: every photon (0), only one whose
+    parent y_{s-1} is a specular surface vertex (1: the subset of Hua et al. 2017's Fig. 4, the
+    photons GPM's manifold branch shifts), or only the others (2: the complement)?"""
+    if prm.parents == 0:
+        return True
+    q = lp.parent[v]
+    spec = q >= 0 and lp.kind[q] == K_SURFACE and specular_vertex(lp, q)
+    return spec == (prm.parents == 1)
+
+
+@block
 def _class_ok(lp, v, state, mask):
     """Is the full path (camera state incl. the gather point, then the photon's light vertices
     y_{k-1} .. y_1 found through ``parent``) of a wanted class?"""
@@ -204,6 +225,8 @@ def density(lp, grid, prm, gp, r):
                     if lp.depth[v] + m + 1 > prm.max_depth:
                         continue
                     if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
+                        continue
+                    if not parent_ok(lp, v, prm):
                         continue
                     cnt += 1
                     wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])

@@ -47,7 +47,7 @@ from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
-from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, pixel_angle
+from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, parent_factor, project, same_point
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
@@ -259,6 +259,8 @@ def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, stack
         if lp.depth[v] + m + 1 > prm.max_depth:
             continue
         if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
+            continue
+        if not parent_ok(lp, v, prm):
             continue
         cnt += 1
         wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])

@@ -42,6 +42,7 @@ from gdlearn.kernels.jit import block
 from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.photons.trace import _adjoint_weight
+from gdlearn.integrators.photon.gather import specular_vertex
 from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row, _segment_reaches
 from gdlearn.integrators.path.gpt_surface.vertex import same_delta_lobe
 from gdlearn.shifts.photon import emission_profile
@@ -81,7 +82,7 @@ def parent_factor(sa, lp, q, v, d_new):
         return 0, (r, r, r), po / pb
     if lp.kind[q] != K_SURFACE:
         return 1, one, 0.0
-    if (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY):
+    if specular_vertex(lp, q):
         return 2, one, 0.0
     if not dot(d_b, nq) * dot(d_new, nq) > 0.0:            # the offset must leave on the base's side
         return 1, one, 0.0

@@ -55,6 +55,8 @@ FOOTPRINT_SAMPLE = 1 << 40
 MAX_LIGHT_VERTICES = 64
 #: how sppm / ppm estimate the direct light (SurfacePhotonMapper)
 DIRECT = ("photons", "nee")
+#: the photon subsets by parent vertex (GatherParams.parents is the index): every photon, specular parents, the rest
+PARENTS = ("any", "specular", "non-specular")
 _PHOTON_CLASSES = (DIRECT_LIGHTING, DIFFUSE_INTERREFLECTION, GLOSSY, SPECULAR, CAUSTICS)
 
 
@@ -97,8 +99,8 @@ def _refuse(setup: SceneSetup) -> None:
 
 class SurfacePhotonMapper(PhotonPassIntegrator):
     """Shared by ``sppm`` and ``ppm``: ``make(name, scene, seed=0, photons_per_pass=100000,
-    alpha=0.7, radius=None, radius_scale=1.0, direct="photons", effects=None, max_depth=None,
-    threads=None)``.
+    alpha=0.7, radius=None, radius_scale=1.0, direct="photons", parent="any", effects=None,
+    max_depth=None, threads=None)``.
 
     ``photons_per_pass`` light paths are emitted per pass, half for each half-buffer; a pass always
     takes 2 camera samples per pixel (one gather point per half), whatever ``spp_per_pass`` says.
@@ -106,16 +108,21 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
     included) or "nee" (direct light at the gather point by emitter sampling, the photons of the
     light paths' first vertices left out; pbrt-v3's ``SPPMIntegrator`` camera pass): the same
     image in the limit, no kernel bias in the direct light, and photons spent on indirect light
-    and caustics only."""
+    and caustics only. ``parent="specular"`` gathers only the photons whose parent vertex is
+    specular (Hua et al. 2017's Fig. 4 subset: the photons GPM's manifold branch shifts),
+    ``"non-specular"`` only the others (the two images sum to the default ``"any"``)."""
 
     def __init__(self, scene, *, seed: int = 0, photons_per_pass: int = 100_000, alpha: float = 0.7,
-                 radius=None, radius_scale: float = 1.0, direct: str = "photons", effects=None, max_depth=None,
-                 threads=None, sa=None, spp_per_pass: int = 2):
+                 radius=None, radius_scale: float = 1.0, direct: str = "photons", parent: str = "any", effects=None,
+                 max_depth=None, threads=None, sa=None, spp_per_pass: int = 2):
         super().__init__(scene, seed=seed, spp_per_pass=2, photons_per_pass=max(2, int(photons_per_pass)))
         if not 0.0 < float(alpha) <= 1.0:
             raise ValueError(f"alpha={alpha!r} must be in (0, 1]; 0.7 is the usual choice")
         if radius is not None and not float(radius) > 0.0:
             raise ValueError(f"radius={radius!r} must be > 0 (scene units), or None for the pixel footprint")
+        if parent not in PARENTS:
+            raise ValueError(f"parent={parent!r}: choose 'any' (every photon), 'specular' (photons whose parent "
+                             "vertex is specular) or 'non-specular' (the others)")
         if direct not in DIRECT:
             raise ValueError(f"direct={direct!r}: choose one of {', '.join(DIRECT)}")
         self.direct = direct
@@ -131,7 +138,8 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
                                         any(mask >> c & 1 for c in _PHOTON_CLASSES if c != CAUSTICS),
                                         want_volume=False)
         self.gather_params = GatherParams(int(min(md, UNBOUNDED)), s.threshold, mask,
-                                          not all(mask >> c & 1 for c in _PHOTON_CLASSES), direct == "nee")
+                                          not all(mask >> c & 1 for c in _PHOTON_CLASSES), direct == "nee",
+                                          PARENTS.index(parent))
         self.tracer = LightTracer(s.sa, self.trace_params, threads=threads)
         self.r2 = None                       # per-pixel squared radius of the next pass
         self.width, self.height = s.width, s.height
