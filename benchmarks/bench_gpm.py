@@ -15,6 +15,18 @@ method's final relMSE per seed and the ratio sppm / method (> 1: lower error tha
 the reference's noise floor subtracted from both errors.
 
     .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3
+
+``--fig4``: Hua et al. 2017's Fig. 4 -- only the photons whose parent vertex is specular
+(``parent="specular"``: the manifold branch's subset; the emission the camera sees left out), at one
+fixed radius (``--radius-scale`` x the mean pixel footprint, alpha = 1, so every pass estimates the
+same blurred image), ``--passes`` passes of gpm per seed; at pass checkpoints the relMSE of the
+primal and of the L1 and L2 reconstructions against a ``--ref-passes`` sppm run of the same subset
+and radius (another seed), and their ratios per seed. Unbiased gradients keep the ratio flat as the
+passes grow (every error is variance, falling as 1/passes); a ratio that sinks towards 1 is a bias
+of the gradients showing through the falling variance.
+
+    .venv/bin/python benchmarks/bench_gpm.py --fig4 --scenes scenes/mirror-caustic.xml,scenes/caustics-box.xml \
+        --res 64 --photons 100000 --passes 32 --seeds 3
 """
 from __future__ import annotations
 
@@ -93,6 +105,55 @@ def equal_time_study(a) -> int:
     return 0
 
 
+def fig4_study(a) -> int:
+    """Primal vs reconstructions on the specular-parent subset (module docstring)."""
+    import numpy as np
+
+    from gdlearn.experiments import SceneFile
+    from gdlearn.experiments.metrics import relmse
+    from gdlearn.experiments.progressive import pass_schedule, snapshot
+    from gdlearn.experiments.references import render_reference
+    from gdlearn.experiments.study import load_scene
+    from gdlearn.kernels.pathclass import CLASS_NAMES
+
+    effects = [c for c in CLASS_NAMES if c != "emission"]
+    marks = pass_schedule(a.passes, 6)
+    names = ("primal", "l1", "l2")
+    print(f"Fig. 4 (specular-parent photons, fixed radius): {a.res}x{a.res}, {a.photons} light paths a pass, "
+          f"{a.passes} passes x {a.seeds} seeds; load average {os.getloadavg()[0]:.2f}")
+    for path in a.scenes.split(","):
+        sf = SceneFile(path, (("res", a.res),))
+        probe = make("sppm", load_scene(sf), seed=0, photons_per_pass=1000)
+        probe.render_pass(0)
+        opts = dict(parent="specular", radius=a.radius_scale * probe.pass_state()["mean_radius"], alpha=1.0,
+                    photons_per_pass=a.photons, threads=a.threads)
+        ref = render_reference(sf, "sppm", spp=2 * a.ref_passes, spp_per_pass=2, effects=effects, **opts)
+        err = {(m, p): [] for m in names for p in marks}
+        moved = failed = 0
+        for seed in range(a.seeds):
+            integ = make("gpm", load_scene(sf), seed=seed, effects=tuple(effects), **opts)
+            integ.warmup()
+            for p in range(1, a.passes + 1):
+                frame = integ.step()
+                if p not in marks:
+                    continue
+                for m in names:
+                    img = frame.primal if m == "primal" else snapshot(frame, m).image
+                    err[m, p].append(relmse(img, ref.image))
+            moved += frame.stats["photon_shifts_manifold"]
+            failed += frame.stats["photon_shifts_failed"]
+        print(f"\n{sf.name}: radius {opts['radius']:.4f}, reference sppm {a.ref_passes} passes (relMSE floor "
+              f"{ref.floor:.1e}); photon shifts of the last passes: manifold {moved / max(moved + failed, 1):.0%}, "
+              f"failed {failed / max(moved + failed, 1):.0%}")
+        for p in marks:
+            e = {m: np.array(err[m, p]) for m in names}
+            print(f"  pass {p:3d}  relMSE primal {e['primal'].mean():.2e} l1 {e['l1'].mean():.2e} l2 {e['l2'].mean():.2e}  "
+                  + "  ".join(f"primal/{m} {(e['primal'] / e[m]).mean():.2f} [{(e['primal'] / e[m]).min():.2f}-"
+                              f"{(e['primal'] / e[m]).max():.2f}]" for m in ("l1", "l2")), flush=True)
+    print(f"load average {os.getloadavg()[0]:.2f}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=SCENES)
@@ -104,7 +165,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--ref-spp", type=int, default=16384)
     ap.add_argument("--methods", default="sppm,gpm,gpm+l1,gpm+l2,pt", help="of --equal-time; sppm first (the ratios' base)")
+    ap.add_argument("--fig4", action="store_true", help="Hua et al. 2017 Fig. 4 (module docstring)")
+    ap.add_argument("--passes", type=int, default=32, help="of --fig4, per seed")
+    ap.add_argument("--ref-passes", type=int, default=400, help="of --fig4's sppm reference")
+    ap.add_argument("--radius-scale", type=float, default=1.0, help="of --fig4: x the mean pixel footprint")
     a = ap.parse_args(argv)
+    if a.fig4:
+        return fig4_study(a)
     if a.equal_time is not None:
         return equal_time_study(a)
     print(f"{a.res}x{a.res}, {a.photons} light paths a pass, {a.threads} threads, median of {a.repeats} passes after "

@@ -43,7 +43,8 @@ from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.photons.trace import _adjoint_weight
 from gdlearn.integrators.photon.gather import specular_vertex
-from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row, _segment_reaches
+from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row
+from gdlearn.kernels.scene_query import intersect
 from gdlearn.integrators.path.gpt_surface.vertex import same_delta_lobe
 from gdlearn.shifts.photon import emission_profile
 from gdlearn.shifts import manifold as M
@@ -151,6 +152,24 @@ def same_point(a, b, yq, r):
 
 
 @block
+def reaches(sa, a, ng_a, b, r, stack):
+    """Does the ray from a (geometric normal ng_a) towards b first hit b, by :func:`same_point`'s
+    tolerance? ``(ok, prim, ng, ns)`` of the hit. The shift and its inverse must judge visibility
+    with one tolerance: the projection (:func:`project`) accepts a hit within same_point of y*,
+    and gpt's ``_segment_reaches`` (POS_TOL of the segment length, ~1e-7) is tighter than the
+    displacement the ray origin's push causes, so a pair built from exact points (the offset
+    chain of an independent solver, tests/test_gpm_manifold.py) passed one way and failed the
+    other on 13 of 400 pairs."""
+    d, ln = _dir(a, b)
+    if not ln > 0.0:
+        return False, -1, a, a
+    hit, _, prim, q, ng, ns, _ = intersect(sa, offset_origin(a, ng_a, d), d, 0.0, math.inf, stack)
+    if not (hit and same_point(q, b, a, r)):
+        return False, -1, a, a
+    return True, prim, ng, ns
+
+
+@block
 def project(sa, prm, yq, nq, ystar, p2, r, stack):
     """Eq. 6's projection: the first surface the ray from the light vertex yq (normal nq) through y*
     hits, which must hold a photon (not specular) and lie in the offset gather point p2's kernel of
@@ -252,7 +271,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     nrm_o = np.empty((k, 6))                        # the offset chain's geometric and shading normals
     for j in range(k + 1):
         bj = (Xo[j, 0], Xo[j, 1], Xo[j, 2]) if j < k else yh
-        good, pj, ngj, nsj, _ = _segment_reaches(sa, a, n_a, bj, stack)
+        good, pj, ngj, nsj = reaches(sa, a, n_a, bj, r, stack)
         if not good:
             return False, zero, 0.0, zero
         if j < k:
@@ -263,7 +282,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
         a, n_a = bj, ngj
     # reversibility (Hua et al. 2017 Sec. 4.3): the offset's own parent must see the base photon
     last = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
-    if not _segment_reaches(sa, last, (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2]), ys, stack)[0]:
+    if not reaches(sa, last, (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2]), ys, r, stack)[0]:
         return False, zero, 0.0, zero
     # J in the solid angle at y_b
     x1 = (X[0, 0], X[0, 1], X[0, 2])
