@@ -22,8 +22,8 @@ shifted to its four neighbours, and every photon it gathers follows by the hybri
 
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
-The MIS weight is Eq. 11 in ratio form (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`) for
-reconnected photons and the constant 1/2 for the manifold walk's (see :func:`!_shift_photons`).
+The MIS weight is Eq. 11 in ratio form (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`) in
+both branches of the light subpath.
 
 Buffers (the contract of :mod:`gdlearn.integrators.gradients`), per half and base pixel: ``L``
 (index 0), ``D_k`` (1 + k) and ``S_k`` (5 + k), k = right, left, down, up, each once for the photon
@@ -293,13 +293,10 @@ def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, stack
             if status == FAILED:
                 _put(out.phi, hh, 1 + k, y, x, c_b, -1.0)           # w = 1, no offset (Hua et al. Sec. 4.3)
                 continue
-            # Eq. 11, 1 / (1 + p'|J| / p), for reconnected photons (their pairs sum to 1 within 1e-9:
-            # tests/test_gpm.py); the constant weight 1/2 for the manifold walk's: with Eq. 11 its
-            # gradients on scenes/mirror-caustic.xml were biased (per-pixel t up to 15 at the
-            # sphere's foot, 6 seeds x 32 passes at 64^2) and with 1/2 they are not (mean t^2 1.64 /
-            # 1.66 for 1.67), so some render pairs' density ratios are not reciprocal, though every
-            # pair of tests/test_gpm_manifold.py's is; any weights summing to 1 over a pair are unbiased
-            wgt = 0.5 if status == MANIFOLD else mis_weight_from_log_ratio(math.log(ratio))
+            # Eq. 11, 1 / (1 + p'|J| / p), in both branches: a pair's two weights sum to 1 within
+            # 1e-9 (reconnection, tests/test_gpm.py) and 1e-4 (the walk's determinants are central
+            # differences; every manifold pair of a render pass, tests/test_gpm_manifold.py)
+            wgt = mis_weight_from_log_ratio(math.log(ratio))
             _put(out.phi, hh, 1 + k, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
             _put(out.phi, hh, 5 + k, y, x, c_o, wgt)
     out.m[hh, y, x] = cnt
