@@ -7,6 +7,8 @@ direction leaving y_b (by central differences of that solver) do not come from g
 PHOTONS.md T2/T4: the Jacobian equals the finite-difference one; the inverse shift, from the offset
 light path built from the solver's chain, succeeds exactly when the forward one does and gives the
 reciprocal power and density ratios, so w(x) + w(T x) = 1 for every pair, failures included.
+The same holds for the pairs a render forms (test_render_pairs_are_reciprocal), and the gradients
+are unbiased at a fixed radius with Eq. 11's weights (test_gradients_unbiased_at_fixed_radius_per_pass).
 """
 from __future__ import annotations
 
