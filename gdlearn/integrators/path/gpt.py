@@ -104,7 +104,8 @@ def gpt_replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume)
 def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         diff = np.zeros((8, 3))
         acc = np.zeros((9, 3))
@@ -126,7 +127,8 @@ def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
 def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         of = np.zeros((4, NF))
         oi = np.zeros((4, NI), dtype=np.int64)
