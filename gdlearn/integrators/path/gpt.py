@@ -45,7 +45,6 @@ from gdlearn.integrators.path.gpt_surface.vertex import NF, NI
 from gdlearn.integrators.path.gpt_volume.lockstep import gpt_volume_rows
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.arrays import borrowed
-from gdlearn.shifts.manifold import SH_WIDTH
 from gdlearn.shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION, POLICY_REPLAY,
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
@@ -79,8 +78,7 @@ def gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
     non-finite samples (the whole sample is dropped). ``gpt_volume.gpt_volume_rows`` has the same
     signature and contract."""
     # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed, as pt)
-    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats,
-              bad, np.full((1, SH_WIDTH), -1.0))
+    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats, bad, None)     # None: no manifold code
 
 
 @block
