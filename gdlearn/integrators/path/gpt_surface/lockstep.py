@@ -351,7 +351,7 @@ def cls_next_of(sa, hit2, prim2, cfg):
     return vclass_of(sa, not hit2, prim2, cfg)
 
 
-@block
+@noalloc
 def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     """One base path through film point (fx, fy) of pixel (x, y) (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`, random numbers ``rng``: ``PathRng``) and its four shifts. Returns the
@@ -360,7 +360,9 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`). ``mtab``: the manifold
     shape table, or None for a specialisation without the manifold walk: numba prunes the
     ``mtab is not None`` branches of a None argument before typing, so the walk (a third of gpt's
-    compile) is compiled only for the manifold kernel."""
+    compile) is compiled only for the manifold kernel. Compiled without reference counting, as are
+    the callees that inherit numba's flags from it; the walk's ``manifold_offset``, which allocates
+    its scratch arrays, asks for them itself."""
     seed, key, s = rng.seed, rng.key, rng.s
     diff[:] = 0.0
     o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
