@@ -3,6 +3,7 @@ gradient error at equal samples, relMSE at equal time.
 
     .venv/bin/python benchmarks/bench_gpt.py                      # 48x48, 5 scenes, 6 s x 2 seeds
     .venv/bin/python benchmarks/bench_gpt.py --res 24 --seconds 1 --seeds 1 --repeat 3 --ref-spp 512   # smoke run
+    .venv/bin/python benchmarks/bench_gpt.py --ratios --res 32 --repeat 9   # gpt/pt per sample, every scene
     NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/bench_gpt.py --res 32 --grad-spp 16 --seeds 24 \
         --et-seeds 3 --seconds 4 --repeat 5 --ref-spp 4096 --threads 1 --et-policies replay+reconnection \
         halfvector+replay+reconnection halfvector+reconnection halfvector+reconnection+manifold
@@ -38,6 +39,7 @@ Nothing is asserted: numbers depend on the machine and its load (printed in the 
 """
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
@@ -93,6 +95,32 @@ def time_per_pass(scene_file, spp, repeat, threads, policies):
             for k, v in res.stats.items():
                 stats[name][k] = stats[name].get(k, 0) + v
     return {k: float(np.median(v)) for k, v in times.items()}, jit, stats
+
+
+def shipped_scenes():
+    return sorted(os.path.splitext(n)[0] for n in os.listdir(os.path.join(ROOT, "scenes")) if n.endswith(".xml"))
+
+
+def print_ratios(a):
+    """Issue 20's table: per shipped scene gpt (default policy) and gpt-replay against pt, CPU seconds
+    per sample of passes rendered interleaved on one thread (medians of ``--repeat``), JIT apart."""
+    print(f"\n## CPU time per sample, 1 thread, {a.res}x{a.res}, {a.spp} spp a pass, median of {a.repeat}")
+    print(f"{'scene':18s} {'policy':34s} {'pt us':>8s} {'gpt/pt':>7s} {'replay/pt':>9s} {'load':>5s}")
+    for name, sf in supported_scenes(a.scenes or shipped_scenes(), a.res).items():
+        scene = sf.load()
+        integs = {m: make(m, scene, seed=0, spp_per_pass=a.spp, threads=1) for m in ("pt", "gpt", "gpt-replay")}
+        for integ in integs.values():
+            integ.warmup()
+        cpu = {m: [] for m in integs}
+        for i in range(a.repeat):
+            for m, integ in integs.items():
+                c0 = time.process_time()
+                integ.render_pass(i)
+                cpu[m].append(time.process_time() - c0)
+        med = {m: float(np.median(v)) for m, v in cpu.items()}
+        n = a.res * a.res * a.spp
+        print(f"{name:18s} {integs['gpt'].shift:34s} {1e6 * med['pt'] / n:8.2f} {med['gpt'] / med['pt']:6.2f}x "
+              f"{med['gpt-replay'] / med['pt']:8.2f}x {os.getloadavg()[0]:5.2f}", flush=True)
 
 
 def print_costs(files, a):
@@ -221,8 +249,16 @@ def main():
     ap.add_argument("--grad-spp", type=int, default=16)
     ap.add_argument("--solvers", nargs="+", default=["l1", "l2"])
     ap.add_argument("--no-equal-time", action="store_true")
+    ap.add_argument("--ratios", action="store_true",
+                    help="only issue 20's table: CPU time per sample of gpt and gpt-replay over pt on every "
+                         "shipped scene (or --scenes), one thread")
     a = ap.parse_args()
     a.et_seeds = a.et_seeds or a.seeds
+    if a.ratios:
+        a.scenes = a.scenes if "--scenes" in sys.argv else None
+        print(f"# gpt vs pt time per sample: load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+        print_ratios(a)
+        return
     print(f"# gpt vs pt / gpt-replay: {a.res}x{a.res}, load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores, threads {a.threads or 'all'}; policies {', '.join(a.policies)}")
     files = supported_scenes(a.scenes, a.res)

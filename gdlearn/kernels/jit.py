@@ -35,21 +35,46 @@ decorator                 use it for
                           row writes only its own pixels or a private buffer.
 ========================  =======================================================================
 
+In a :func:`rows` loop, write ``for row in prange(h): y = np.int64(row)``: numba types the prange
+index as int64 while it infers the loop's types and as uint64 when it lowers the parallel body, so
+every non-inlined function that receives the raw index is compiled twice (the whole gpt sample
+function and everything under it: ~20 s of a cold compile).
+
 Each decorator works bare (``@leaf``) and with extra numba options (``@block(fastmath=True)``).
 """
 from __future__ import annotations
 
-from numba import njit
+from numba.core import types
+from numba.core.registry import CPUDispatcher
 
-_BASE = dict(cache=True, error_model="numpy")
+_BASE = dict(error_model="numpy", nopython=True, boundscheck=None)
+
+
+class _Dispatcher(CPUDispatcher):
+    """numba's dispatcher, typed for the *non-literal* types of its arguments when called from compiled
+    code. numba's own compiles one specialisation per constant at a call site (``get3(of, k, F_POS)``
+    and ``get3(of, k, F_WI)`` are two functions, ``dim(depth, D_LOBE)`` one per dimension): a cold
+    compile of gpt typed and optimised ~30 such copies. The callee is inlined by LLVM (or small), so
+    the constants are still folded where it matters."""
+
+    def get_call_template(self, args, kws):
+        args = tuple(types.unliteral(a) for a in args)
+        kws = {k: types.unliteral(v) for k, v in kws.items()}
+        return super().get_call_template(args, kws)
+
+
+def _compile(fn, opts):
+    disp = _Dispatcher(py_func=fn, locals={}, targetoptions=opts)
+    disp.enable_caching()            # cache=True
+    return disp
 
 
 def _recipe(**options):
     def decorator(fn=None, **extra):
         opts = {**_BASE, **options, **extra}
         if fn is None:
-            return lambda f: njit(**opts)(f)
-        return njit(**opts)(fn)
+            return lambda f: _compile(f, opts)
+        return _compile(fn, opts)
     return decorator
 
 

@@ -45,7 +45,6 @@ from gdlearn.integrators.path.gpt_surface.vertex import NF, NI
 from gdlearn.integrators.path.gpt_volume.lockstep import gpt_volume_rows
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.arrays import borrowed
-from gdlearn.shifts.manifold import SH_WIDTH
 from gdlearn.shifts.policy import (MAX_CHAIN, N_STATS, POLICIES, POLICY_HALFVECTOR_RECONNECTION, POLICY_REPLAY,
                              POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, policy_code, stats_dict)
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
@@ -79,8 +78,7 @@ def gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
     non-finite samples (the whole sample is dropped). ``gpt_volume.gpt_volume_rows`` has the same
     signature and contract."""
     # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed, as pt)
-    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats,
-              bad, np.full((1, SH_WIDTH), -1.0))
+    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats, bad, None)     # None: no manifold code
 
 
 @block
@@ -104,7 +102,8 @@ def gpt_replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume)
 def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         diff = np.zeros((8, 3))
         acc = np.zeros((9, 3))
@@ -126,7 +125,8 @@ def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
 def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         of = np.zeros((4, NF))
         oi = np.zeros((4, NI), dtype=np.int64)

@@ -111,7 +111,8 @@ def _replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, thresho
                      out, counts, diag, want_diag):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         acc = np.zeros((5, 3))
         cnt = counts[y]
@@ -160,7 +161,8 @@ def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thre
                      out, counts, diag, want_diag):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         acc = np.zeros((5, 3))
         cnt = counts[y]

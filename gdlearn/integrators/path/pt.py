@@ -47,7 +47,8 @@ def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
 def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         nbad = 0
         for x in range(w):
@@ -80,7 +81,8 @@ def render_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, thresh
 
 @rows
 def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
-    for y in prange(out.shape[0]):
+    for row in prange(out.shape[0]):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         S, Q, buf = surface_packet.new_buffers()
         bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
@@ -97,7 +99,8 @@ def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thres
 def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         nbad = 0
         for x in range(w):

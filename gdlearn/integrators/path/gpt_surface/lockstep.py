@@ -66,7 +66,7 @@ from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
                                    SHIFT_RECONNECT, SHIFT_REPLAY, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
-from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.jit import block, inlined, leaf, noalloc
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
 from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, NextVertex
 
@@ -295,6 +295,21 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, d
     return cb
 
 
+@inlined
+def _manifold_segment(sa, mtab, k, of, oi, m, cf, ci, cfg, bv, stats, stack):
+    """Free offset k takes the manifold shift through the base's looked-ahead chain of length m."""
+    mat_o = sa.materials[oi[k, I_MAT]]
+    if decide(cfg.policy, bv.cls_s, vertex_class(mat_o, cfg.threshold), V_SPECULAR) == SHIFT_FAIL:
+        record(stats, SHIFT_FAIL, False)
+        oi[k, I_ALIVE] = FAILED
+        return
+    ok = manifold_offset(sa, mtab, k, of, oi, m, cf, ci, bv.x, mat_o, bv.pdf, cfg,
+                         cfg.broken == BROKEN_MANIFOLD_JACOBIAN, stack)
+    record(stats, SHIFT_MANIFOLD, ok)
+    if not ok:
+        oi[k, I_ALIVE] = FAILED
+
+
 @block
 def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
     """Extend every live offset by the segment the base just sampled, x_b = ``bv.x`` -> x_{b+1} = ``nx.p``
@@ -303,25 +318,16 @@ def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
     and free offsets take the manifold shift. ``cls_b``: the base lobe's effect class; ``cls_s``: its
     class for the shift decisions (a function of the path, :mod:`gdlearn.shifts.policy`): ``bv.cls_b``,
     ``bv.cls_s``."""
-    cls_s = bv.cls_s
     for k in range(4):
         if oi[k, I_ALIVE] != ALIVE:
             continue
         if oi[k, I_PENDING] > 0:             # moved to x_c already: wait for the base
             oi[k, I_PENDING] -= 1
             continue
-        if m > 0 and oi[k, I_RECONN] == FREE and oi[k, I_ESCAPED] == 0:
-            mat_o = sa.materials[oi[k, I_MAT]]
-            if decide(cfg.policy, cls_s, vertex_class(mat_o, cfg.threshold), V_SPECULAR) == SHIFT_FAIL:
-                record(stats, SHIFT_FAIL, False)
-                oi[k, I_ALIVE] = FAILED
+        if mtab is not None:              # None: this specialisation has no manifold code (gpt_sample)
+            if m > 0 and oi[k, I_RECONN] == FREE and oi[k, I_ESCAPED] == 0:
+                _manifold_segment(sa, mtab, k, of, oi, m, cf, ci, cfg, bv, stats, stack)
                 continue
-            ok = manifold_offset(sa, mtab, k, of, oi, m, cf, ci, bv.x, mat_o, bv.pdf, cfg,
-                                 cfg.broken == BROKEN_MANIFOLD_JACOBIAN, stack)
-            record(stats, SHIFT_MANIFOLD, ok)
-            if not ok:
-                oi[k, I_ALIVE] = FAILED
-            continue
         if oi[k, I_RECONN] != FREE:
             follow_base(sa, k, of, oi, bv, cfg)
             if oi[k, I_ALIVE] == ALIVE:
@@ -345,13 +351,18 @@ def cls_next_of(sa, hit2, prim2, cfg):
     return vclass_of(sa, not hit2, prim2, cfg)
 
 
-@block
+@noalloc
 def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     """One base path through film point (fx, fy) of pixel (x, y) (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`, random numbers ``rng``: ``PathRng``) and its four shifts. Returns the
     base radiance (the primal sample); ``diff`` (8, 3): ``diff[k]`` receives the gradient sample of
     shift k (right, left, down, up), zero for a shift outside the image, and ``diff[4 + k]`` the
-    MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`)."""
+    MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`). ``mtab``: the manifold
+    shape table, or None for a specialisation without the manifold walk: numba prunes the
+    ``mtab is not None`` branches of a None argument before typing, so the walk (a third of gpt's
+    compile) is compiled only for the manifold kernel. Compiled without reference counting, as are
+    the callees that inherit numba's flags from it; the walk's ``manifold_offset``, which allocates
+    its scratch arrays, asks for them itself."""
     seed, key, s = rng.seed, rng.key, rng.s
     diff[:] = 0.0
     o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
@@ -396,9 +407,10 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
         nx = NextVertex(hit2, EV_SURFACE if hit2 else EV_ESCAPE, prim2, p2, ng2, ns2, d2, -1,
                         cls_next_of(sa, hit2, prim2, cfg), False)
         m = 0
-        if cfg.policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_s) and hit2 and \
-                vclass_of(sa, False, prim2, cfg) == V_SPECULAR and _any_free(oi):
-            m = lookahead_chain(sa, mtab, nx, rng, depth + 1, cfg, cf, ci, stack)
+        if mtab is not None:
+            if cfg.policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_s) and hit2 and \
+                    vclass_of(sa, False, prim2, cfg) == V_SPECULAR and _any_free(oi):
+                m = lookahead_chain(sa, mtab, nx, rng, depth + 1, cfg, cf, ci, stack)
         _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)

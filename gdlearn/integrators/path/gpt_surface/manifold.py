@@ -143,7 +143,7 @@ def _solid_angle_factor(x, x1, n1):
     return abs(dot(dv, n1)) / (math.sqrt(d2) * d2)
 
 
-@block
+@block(_nrt=True)       # explicit: its callers run without reference counting, it allocates
 def manifold_offset(sa, mtab, k, of, oi, m, cf, ci, x_b, mat_b_o, pdf_b, cfg, broken_jacobian, stack):
     """Move offset k (at its connectable vertex x'_b, material row mat_b_o) through the looked-ahead
     chain of length m to the base's x_c. On success updates beta' and lr (Eq. 16-17), places the

@@ -355,7 +355,8 @@ def gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
 def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for y in prange(h):
+    for row in prange(h):
+        y = np.int64(row)     # see kernels.jit: one type for the row index
         stack = np.empty(STACK_SIZE, dtype=np.int32)
         of = np.zeros((4, NFV))
         oi = np.zeros((4, NIV), dtype=np.int64)
