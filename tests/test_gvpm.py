@@ -120,3 +120,105 @@ def test_refusals(fog):
         make("gvpm", fog, transport="media", radii="knn")
     with pytest.raises(ValueError, match="medium"):
         make("gvpm", load("scenes/cornell-box.xml", res=8), transport="media")
+
+
+def test_mis_weights_of_a_pair_sum_to_one():
+    """PHOTONS.md T4 on real light paths of the fog box and real kernel code: a volume photon b moved by
+    the mixed shift (gather point d -> d') and reconnected from its parent (the emitter, a wall, a
+    medium vertex), and the reverse shift of the offset path (d' -> d: the mixed shift returns b, the
+    reconnection from the same parent) give light-side density ratios r, r' with r r' = 1 and
+    power ratios that invert; the camera side's ratio (the distance copy between two beams of
+    different lengths and weights: each side's own selection probability and truncated density,
+    E10) inverts too, so w(x) + w(T x) = 1 to 1e-9. Random gather points within r of the photon,
+    |d' - d| up to 1.5 r."""
+    from gdlearn.integrators.photon import gvpm_gather as gg
+    from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_S, BEAM_W, MAX_BEAMS
+    from gdlearn.integrators.photon.gvpm_light import OK, reconnect
+    from gdlearn.kernels.accel.bvh import STACK_SIZE
+    from gdlearn.photons.records import K_MEDIUM
+    from gdlearn.shifts.mis import mis_weight_from_log_ratio
+    from gdlearn.shifts.volume_photon import NULL, mixed_shift, truncated_distance_pdf
+
+    g = make("gvpm", load("scenes/fog-box.xml", res=8), transport="media", photons_per_pass=100)
+    sa = g.setup.sa
+    lp = g.tracer.trace(11, 0, 0, 600)
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    rng = np.random.default_rng(8)
+    r = 0.3
+    # two camera paths of two beams each, different lengths and weights: base and offset
+    beams = [np.zeros((MAX_BEAMS, BEAM_COLS)) for _ in range(2)]
+    for bm, s, wts in ((beams[0], (1.3, 2.9), (0.9, 0.35)), (beams[1], (1.45, 2.6), (0.8, 0.5))):
+        for i in range(2):
+            bm[i, BEAM_D + 2] = -1.0
+            bm[i, BEAM_S] = s[i]
+            bm[i, BEAM_W:BEAM_W + 3] = wts[i]
+    tested = {}
+    for v in np.flatnonzero((lp.kind == K_MEDIUM) & (lp.parent >= 0)):
+        b = lp.pos[v].copy()
+        d = b + _ball_point(rng, r)
+        d2 = d + _ball_point(rng, 1.5 * r)
+        b2, kind = mixed_shift(tuple(b), tuple(d), tuple(d2), r)
+        if kind == NULL:
+            continue
+        st, f3, rl, w_new = reconnect(sa, lp, v, b2, stack)
+        if st != OK:
+            continue
+        lp2 = type(lp)(*(f.copy() for f in lp))      # the offset light path, as if it had been traced
+        lp2.pos[v] = b2
+        lp2.d_in[v] = w_new
+        back, kind2 = mixed_shift(b2, tuple(d2), tuple(d), r)
+        assert np.allclose(back, b, rtol=0, atol=1e-12) and kind2 == kind
+        st2, f3b, rlb, _ = reconnect(sa, lp2, v, tuple(b), stack)
+        assert st2 == OK
+        assert rl * rlb == pytest.approx(1.0, abs=1e-9)
+        assert np.allclose(np.array(f3) * np.array(f3b), 1.0, rtol=1e-9)
+        # the camera side, through the kernel's own code, beam k and a distance t both beams reach
+        k, t = int(rng.integers(2)), rng.uniform(0.0, 1.3)
+        rc = []
+        for i in range(2):
+            base, off = beams[i], beams[1 - i]
+            pb = gg._beam_prob(base, 2, k)
+            pdf = truncated_distance_pdf(0.2, base[k, BEAM_S], t)
+            og = np.zeros((4, 11))
+            gg._offset_gather((np.stack([off] * 4), np.array([True, False, False, False])), 2, k, t, 0.2, pb,
+                              pdf, (1.0, 1.0, 1.0), 1.0, og)
+            assert og[0, 0] == 1.0 and og[1, 0] == 0.0
+            rc.append(og[0, 10])
+        w = mis_weight_from_log_ratio(math.log(rc[0] * rl)) + mis_weight_from_log_ratio(math.log(rc[1] * rlb))
+        assert w == pytest.approx(1.0, abs=1e-9)
+        q = lp.parent[v]
+        tested[int(lp.kind[q])] = tested.get(int(lp.kind[q]), 0) + 1
+    assert all(tested.get(k, 0) > 20 for k in (0, 1, 2)), tested      # emitter, surface, medium parents
+
+
+def _ball_point(rng, r):
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v) * r * rng.uniform() ** (1 / 3)
+
+
+def test_cli_renders_and_reconstructs(tmp_path):
+    """``gdlearn render SCENE --integrator gvpm --transport media --recon l1`` writes the image and the
+    buffers (gradients, shift counts); --transport all is refused with the fix named; gpt-only
+    shift policies are refused for gvpm and gvpm's for gpt."""
+    import subprocess
+    import sys
+    env_cmd = [sys.executable, "-m", "gdlearn", "render", "scenes/fog-box.xml", "--set", "res=8", "--spp", "4",
+               "--photons", "2000", "--no-progress"]
+    out = tmp_path / "img.npy"
+    p = subprocess.run(env_cmd + ["--integrator", "gvpm", "--transport", "media", "--recon", "l1",
+                                  "--shift", "simple", "--out", str(out), "--buffers", str(tmp_path / "b")],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    img = np.load(out)
+    assert img.shape == (8, 8, 3) and np.isfinite(img).all() and img.mean() > 0
+    for name in ("gx", "gy", "primal_base", "shift_null", "shift_failed"):
+        assert (tmp_path / "b" / f"{name}.npy").exists()
+    assert np.load(tmp_path / "b" / "shift_null.npy").sum() == 0          # the simple shift has no null part
+    p = subprocess.run(env_cmd + ["--integrator", "gvpm", "--out", str(out)], capture_output=True, text=True)
+    assert p.returncode == 2 and "--transport media" in p.stderr
+    p = subprocess.run(env_cmd + ["--integrator", "gvpm", "--transport", "media", "--shift", "replay",
+                                  "--out", str(out)], capture_output=True, text=True)
+    assert p.returncode == 2 and "--shift" in p.stderr
+    p = subprocess.run(env_cmd + ["--integrator", "pt", "--shift", "mixed", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert p.returncode == 2
