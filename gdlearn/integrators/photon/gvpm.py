@@ -21,8 +21,9 @@ every pixel: each pass is then an independent estimate of the blurred image and 
 unbiased for its differences (tests/test_gvpm.py). No photon subsets (E16: they would halve M).
 
 ``shift="mixed"`` (default; Eq. 16) or ``"simple"`` (every photon translated by d' - d and
-reconnected). Photons whose parent is specular or a null interface fail their shift (counted):
-the manifold walk of Sec. 4.3 is not implemented for volumes yet.
+reconnected). Reconnections cross null interfaces (a medium's boundary) as the base edge did
+(:mod:`gdlearn.integrators.photon.gvpm_light`). Photons whose parent is specular fail their shift
+(counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet.
 """
 from __future__ import annotations
 

@@ -21,24 +21,33 @@ p_l the tracer's collision density (:func:`gdlearn.kernels.media.medium.distance
 Base and offset densities are computed by the same function from positions, so the reverse shift's
 ratio is the exact reciprocal and the two MIS weights of a pair sum to one.
 
-Refused (the shift fails: weight 1, no offset): a parent on a specular lobe or a null interface
-(the manifold walk is not implemented for volumes yet), a surface parent whose new direction leaves
-on the other side of its geometric normal (Sec. 5.11), and an offset edge that meets any surface
-before b' -- visibility is tested over the *whole* segment a -> b' (the reference code's test
-covers only its first 0.1 %, PHOTONS.md E8). Since the base edge a -> b of a recorded light path
-crosses no surface (a null interface would be a vertex of its own), this keeps b' in the photon's
-medium and makes the rule symmetric between a shift and its reverse.
+Null interfaces (a medium's index-matched boundary) are not scattering vertices: the records keep
+them as vertices of their own, but the parent a is the nearest ancestor that is not one, and the
+edge a -> b is a straight line through them (a spot light above a block of smoke: every
+single-scattered photon's edge crosses the block's top). The offset edge a -> b' is walked through
+the same number of them (:func:`edge_walk`), T is the product over its media segments and p_l the
+pass probabilities of the earlier segments times the collision density of the last (what the
+tracer samples).
+
+Refused (the shift fails: weight 1, no offset): a parent on a specular lobe (the manifold walk is
+not implemented for volumes yet), a surface parent whose new direction leaves on the other side of
+its geometric normal (Sec. 5.11), an offset edge that crosses another number of null interfaces or
+ends in another medium, and one that meets any other surface before b' -- visibility is tested over
+the *whole* segment a -> b' (the reference code's test covers only its first 0.1 %, PHOTONS.md E8).
+The rules are symmetric between a shift and its reverse.
 """
 from __future__ import annotations
 
 import math
 
 from gdlearn.kernels.accel.bvh import closest_hit_inline
-from gdlearn.kernels.geometry import offset_origin
+from gdlearn.kernels.bsdf.dispatch import bsdf_is_null
+from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
 from gdlearn.kernels.jit import block
-from gdlearn.kernels.media.medium import distance_pdf, medium_params
+from gdlearn.kernels.media.boundary import next_medium
+from gdlearn.kernels.media.medium import distance_pdf, medium_params, pass_probability
 from gdlearn.kernels.media.phase import hg_eval
-from gdlearn.photons.records import K_MEDIUM
+from gdlearn.photons.records import K_MEDIUM, K_SURFACE
 from gdlearn.integrators.photon.gpm_light import _dir, parent_factor
 
 #: reconnect() outcomes
@@ -67,37 +76,112 @@ def _parent_ratio(sa, lp, q, v, w_new):
     return OK, fr, pr
 
 
+#: null interfaces the edge a -> b may cross (a light path records at most a few: a medium's boundary)
+MAX_CROSSINGS = 16
+
+
+@block
+def _ancestor(sa, lp, v):
+    """(a, child, crossings): the photon's parent a = y_{s-1} -- its nearest ancestor that is not a null
+    interface (those only change the medium: the edge a -> b is one straight line through them) --,
+    the row after a on that edge (whose ``medium`` the edge starts in), and how many it crosses."""
+    child = v
+    q = lp.parent[v]
+    n = 0
+    while q >= 0 and lp.kind[q] == K_SURFACE and bsdf_is_null(sa.materials[lp.obj[q]]):
+        child = q
+        q = lp.parent[q]
+        n += 1
+    return q, child, n
+
+
+@block
+def edge_walk(sa, a, o, w, target, medium, stack):
+    """Walk the straight edge from the vertex ``a`` (rays spawned at ``o``, a pushed off a surface) towards ``target``: through null interfaces
+    (the medium changes at each, Mitsuba's rule), failing at any other surface -- visibility over
+    the whole segment, PHOTONS.md E8. Returns (ok, null crossings, optical depth per channel, log of
+    the tracer's density of a collision at ``target`` -- the pass probabilities of the earlier media
+    segments times the collision density of the last, spectral MIS --, the medium at ``target``)."""
+    tau = (0.0, 0.0, 0.0)
+    logp = 0.0
+    prev = a            # lengths from the vertex itself, as the analytic base of reconnect(): exact reciprocals
+    n = 0
+    for _ in range(MAX_CROSSINGS + 1):
+        t, prim, uu, vv = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, w, 0.0, math.inf,
+                                             stack)
+        reach = math.sqrt((target[0] - o[0]) ** 2 + (target[1] - o[1]) ** 2 + (target[2] - o[2]) ** 2)
+        if prim < 0 or t > reach:
+            ln = math.sqrt((target[0] - prev[0]) ** 2 + (target[1] - prev[1]) ** 2 + (target[2] - prev[2]) ** 2)
+            if medium < 0:
+                return False, n, tau, 0.0, medium          # a photon lies in a medium
+            sig = medium_params(sa.media[medium])[0]
+            pc = distance_pdf(sig, ln)
+            if not pc > 0.0:
+                return False, n, tau, 0.0, medium
+            return True, n, (tau[0] + sig[0] * ln, tau[1] + sig[1] * ln, tau[2] + sig[2] * ln), logp + math.log(pc), \
+                medium
+        if not bsdf_is_null(sa.materials[sa.prim_info[prim, INFO_MAT]]):
+            return False, n, tau, 0.0, medium              # occluded before b'
+        p, ng, _ = surface(sa.prims, sa.prim_info, prim, o, w, t, uu, vv)
+        if medium >= 0:
+            ln = math.sqrt((p[0] - prev[0]) ** 2 + (p[1] - prev[1]) ** 2 + (p[2] - prev[2]) ** 2)
+            sig = medium_params(sa.media[medium])[0]
+            pp = pass_probability(sig, ln)
+            if not pp > 0.0:
+                return False, n, tau, 0.0, medium
+            tau = (tau[0] + sig[0] * ln, tau[1] + sig[1] * ln, tau[2] + sig[2] * ln)
+            logp += math.log(pp)
+        medium = next_medium(sa.prim_info, prim, medium, w, ng)
+        o = offset_origin(p, ng, w)
+        prev = p
+        n += 1
+    return False, n, tau, 0.0, medium
+
+
 @block
 def reconnect(sa, lp, v, b_off, stack):
     """Reconnect photon row v's parent to the offset photon ``b_off`` (module docstring). Returns
     (status, beta_b' / beta_b per channel, light-side density ratio p(b' | a) / p(b | a), the
     direction a -> b' the offset photon arrives along)."""
     zero = (0.0, 0.0, 0.0)
-    q = lp.parent[v]
+    q, child, n_null = _ancestor(sa, lp, v)
     if q < 0:
         return FAIL, zero, 0.0, zero
     a = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     w_new, l_new = _dir(a, b_off)
-    _, l_old = _dir(a, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
+    w_old, l_old = _dir(a, b)
     if not (l_new > 0.0 and l_old > 0.0):
         return FAIL, zero, 0.0, zero
     status, fr, pr = _parent_ratio(sa, lp, q, v, w_new)
     if status != OK:
         return status, zero, 0.0, zero
-    o = a if lp.kind[q] == K_MEDIUM else offset_origin(a, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), w_new)
-    t, prim, _, _ = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, w_new, 0.0, math.inf,
-                                       stack)
-    reach = math.sqrt((b_off[0] - o[0]) ** 2 + (b_off[1] - o[1]) ** 2 + (b_off[2] - o[2]) ** 2)
-    if prim >= 0 and t <= reach:       # the whole segment a -> b' (E8), not its first 0.1 %
+    start = lp.medium[child]
+    ok, n_o, tau_o, logp_o, med_o = edge_walk(sa, a, _spawn(lp, q, a, w_new), w_new, b_off, start, stack)
+    if not (ok and n_o == n_null and med_o == lp.medium[v]):
         return FAIL, zero, 0.0, zero
-    sig = medium_params(sa.media[lp.medium[v]])[0]
-    p_old = distance_pdf(sig, l_old)
-    p_new = distance_pdf(sig, l_new)
-    if not (p_old > 0.0 and p_new > 0.0):
-        return FAIL, zero, 0.0, zero
+    if n_null == 0:
+        # a recorded edge crosses no surface: its optical depth and density need no ray
+        sig = medium_params(sa.media[lp.medium[v]])[0]
+        pc = distance_pdf(sig, l_old)
+        if not pc > 0.0:
+            return FAIL, zero, 0.0, zero
+        tau_b, logp_b = (sig[0] * l_old, sig[1] * l_old, sig[2] * l_old), math.log(pc)
+    else:
+        ok, n_b, tau_b, logp_b, med_b = edge_walk(sa, a, _spawn(lp, q, a, w_old), w_old, b, start, stack)
+        if not (ok and n_b == n_null and med_b == lp.medium[v]):
+            return FAIL, zero, 0.0, zero
     geo = (l_old * l_old) / (l_new * l_new)
-    dl = l_new - l_old
-    # T(l') / T(l) = exp(-sigma (l' - l)) per channel: one exponential, no 0 / 0 in a dense medium
-    f3 = (fr[0] * math.exp(-sig[0] * dl) * geo, fr[1] * math.exp(-sig[1] * dl) * geo,
-          fr[2] * math.exp(-sig[2] * dl) * geo)
-    return OK, f3, pr * (p_new / p_old) * geo, w_new
+    # T(a, b') / T(a, b) = exp(-(tau' - tau)) per channel: one exponential, no 0 / 0 in a dense medium
+    f3 = (fr[0] * math.exp(tau_b[0] - tau_o[0]) * geo, fr[1] * math.exp(tau_b[1] - tau_o[1]) * geo,
+          fr[2] * math.exp(tau_b[2] - tau_o[2]) * geo)
+    return OK, f3, pr * math.exp(logp_o - logp_b) * geo, w_new
+
+
+@block
+def _spawn(lp, q, a, w):
+    """Where a ray from vertex row q leaves along w: a medium vertex in place, a surface or an emitter
+    pushed off its geometric normal (a point light's zero normal leaves it in place)."""
+    if lp.kind[q] == K_MEDIUM:
+        return a
+    return offset_origin(a, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), w)
