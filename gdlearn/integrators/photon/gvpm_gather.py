@@ -22,9 +22,11 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    (:func:`gdlearn.integrators.photon.gvpm_light.reconnect`).
 5. **MIS** (Eq. 19, balance heuristic in ratio form, :func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`):
    the offset over base density ratio is the camera side's ``[P'(b) p'(t)] / [P(b) p(t)]`` -- the
-   offset's own beam-selection probability and its truncated-exponential density on its own beam
-   (PHOTONS.md E10; the reference code uses the base's, so its weights are not complementary) --
-   times the light side's (1 for a null shift). The offset contribution itself uses the base's
+   offset's own beam-selection probability and its truncated-exponential density on its own beam,
+   the densities the offset pixel samples with (PHOTONS.md E10) -- times the light side's (1 for a
+   null shift). (The reference code's base selection probability for the offset cancels in the
+   ratio, each way, so its weights are complementary too: E10 makes them the balance heuristic
+   proper, not unbiased where they were not.) The offset contribution itself uses the base's
    densities (f(T x) |J| / p(x), |J| = 1).
 
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
