@@ -200,7 +200,7 @@ def test_mis_weights_of_a_pair_sum_to_one():
             base, off = beams[i], beams[1 - i]
             pb = gg._beam_prob(base, 2, k)
             pdf = truncated_distance_pdf(0.2, base[k, BEAM_S], t)
-            og = np.zeros((4, 11))
+            og = np.zeros((4, 12))
             gg._offset_gather((np.stack([off] * 4), np.array([True, False, False, False])), 2, k, t, 0.2, pb,
                               pdf, (1.0, 1.0, 1.0), 1.0, og)
             assert og[0, 0] == 1.0 and og[1, 0] == 0.0

@@ -159,7 +159,8 @@ def _point(beams, b, t):
 @block
 def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
     """The distance copy onto every neighbour's beam b: og[j] = (ok, d' (3), w'_c (3), camera factor
-    W' T(t) k0 (3), camera-side density ratio P'(b) p'(t) / (P(b) p(t)))."""
+    W' T(t) k0 (3), camera-side density ratio P'(b) p'(t) / (P(b) p(t)), the MIS weight of a null
+    shift -- which depends on the camera side only, so it is computed once per sample and neighbour)."""
     obeams, o_ok = offs
     for j in range(4):
         og[j, 0] = 0.0
@@ -178,13 +179,14 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
             og[j, 4 + c] = ob[b, BEAM_D + c]
             og[j, 7 + c] = ob[b, BEAM_W + c] * tr[c] * k0
         og[j, 10] = ratio
+        og[j, 11] = mis_weight_from_log_ratio(math.log(ratio))
 
 
 @block
 def _samples(sa, lp, grid, prm, gv, h, base, offs, r, buf, stack, out, hh, y, x):
     """VPM's K distance samples of one camera path, their photons and the photons' shifts."""
     beams, bstate, nb = base
-    og = np.empty((4, 11))
+    og = np.empty((4, 12))
     K = gv.samples
     cnt = 0
     nbad = 0
@@ -258,7 +260,8 @@ def _shift_photon(sa, lp, v, dg, g, r, mixed, og, c_b, stack, out, hh, y, x):
             out.count[hh, C_FAILED, y, x] += 1
             _put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
             continue
-        wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic
+        # Eq. 19, balance heuristic (a null shift's: the camera side's, og[j, 11])
+        wgt = og[j, 11] if kind == NULL else mis_weight_from_log_ratio(math.log(ratio))
         _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
         _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
     return nbad
