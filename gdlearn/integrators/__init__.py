@@ -19,6 +19,7 @@ REGISTRY = {
     "gpm": "gdlearn.integrators.photon.gpm:GPM",
     "vpm": "gdlearn.integrators.photon.volumetric:VPM",
     "bre": "gdlearn.integrators.photon.volumetric:BRE",
+    "gvpm": "gdlearn.integrators.photon.gvpm:GVPM",
 }
 
 

@@ -1,0 +1,278 @@
+"""The camera pass of gradient-domain volumetric photon mapping, G-VPM (Gruson et al. 2018, Sec. 4;
+PHOTONS.md Sec. 5.5), light transport ending in the medium.
+
+Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrators.photon.volume_gather`):
+
+1. **Base**: the camera path with long beams (:func:`gdlearn.integrators.photon.camera_beams.beam_path`)
+   and VPM's K stratified distance samples on its beams (the same random dimensions as
+   :func:`gdlearn.integrators.photon.volume_estimates.vpm_beam`, so the base buffer *is* VPM's medium
+   estimate): beam b with probability P(b), the gather point d at distance t ~ p(t) on it, every
+   volume photon in Ball(d, R).
+2. **Offset camera subpaths** (once per camera sample): the path re-traced from the neighbour's film
+   position (the base position +-1 pixel, the sub-pixel offset kept) with the base's random numbers,
+   as GPM does (:mod:`gdlearn.integrators.photon.gpm_gather`): the random-replay shift, whose camera
+   prefix weight is the offset's own f / p and whose prefix density ratio is 1. It must have the
+   base's structure -- as many beams, each in the same medium after the same surface vertices of
+   the same classes -- or the shift fails (a symmetric rule). A neighbour outside the image is a
+   failed shift (PHOTONS.md E12).
+3. **Camera distance copy** (Eq. 14-15, :func:`gdlearn.shifts.volume_photon.camera_distance_copy`):
+   d' = c' + t w'_c on the offset's beam b; fails where that beam is shorter than t.
+4. **Photon shift** (Eq. 16, mixed by default; ``simple``: every photon translated), then the light
+   subpath: unchanged for a null-shifted photon (T(y) = y), else reconnected from its parent
+   (:func:`gdlearn.integrators.photon.gvpm_light.reconnect`).
+5. **MIS** (Eq. 19, balance heuristic in ratio form, :func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`):
+   the offset over base density ratio is the camera side's ``[P'(b) p'(t)] / [P(b) p(t)]`` -- the
+   offset's own beam-selection probability and its truncated-exponential density on its own beam,
+   the densities the offset pixel samples with (PHOTONS.md E10) -- times the light side's (1 for a
+   null shift). (The reference code's base selection probability for the offset cancels in the
+   ratio, each way, so its weights are complementary too: E10 makes them the balance heuristic
+   proper, not unbiased where they were not.) The offset contribution itself uses the base's
+   densities (f(T x) |J| / p(x), |J| = 1).
+
+Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
+S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
+VPM does); ``count`` the photon shifts: null (b' = b), mixed (reflected by Eq. 16; they are also
+counted as reconnected), reconnected (a light subpath completed), failed (camera or light side).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from gdlearn.kernels.accel.bvh import STACK_SIZE
+from gdlearn.kernels.arrays import borrow, borrowed
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.media.medium import medium_params, sample_distance_truncated_1, transmittance
+from gdlearn.kernels.media.phase import hg_eval
+from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.photons.grid import query as grid_query
+from gdlearn.photons.trace import _borrow_rec
+from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
+    beam_path
+from gdlearn.integrators.photon.gather import _borrow_grid
+from gdlearn.integrators.photon.gvpm_light import OK, reconnect
+from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam
+from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
+from gdlearn.shifts.volume_photon import NULL, REFLECTED, camera_distance_copy, photon_shift, truncated_distance_pdf
+
+#: GvpmOut.count[:, i]: null-shifted, mixed (reflected), reconnected, failed photon shifts
+C_NULL, C_MIXED, C_RECONNECTED, C_FAILED = 0, 1, 2, 3
+
+
+class GvpmParams(NamedTuple):
+    samples: int          # distance samples per camera path (VPM's K)
+    mixed: bool           # the mixed shift (Eq. 16); False: the simple shift (a translation)
+
+
+class GvpmOut(NamedTuple):
+    phi: np.ndarray       # (2, 9, H, W, 3): L, D_k, S_k of the medium terms, without 1 / V(R)
+    m: np.ndarray         # (2, H, W): photons the base gather points found (SPPM's M)
+    count: np.ndarray     # (2, 4, H, W): photon shifts null / mixed / reconnected / failed
+    bad: np.ndarray       # (H,): non-finite terms dropped
+
+
+def allocate(h: int, w: int) -> GvpmOut:
+    return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, 4, h, w)), np.zeros(h, np.int64))
+
+
+@block
+def gvpm_rows(sa, lp, grids, prm, gv, seed, sample0, radius, out):
+    """Every pixel's two camera samples (sample0 + hh; half hh gathers grids[hh]) and their four shifts
+    into ``out`` (a :class:`GvpmOut`); ``radius`` (H x W) is the kernel radius per pixel."""
+    _gvpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), prm, gv, seed, sample0,
+               radius, GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
+
+
+@rows
+def _gvpm_rows(sa, lp, ga, gb, prm, gv, seed, sample0, radius, out):
+    for y in prange(radius.shape[0]):
+        out.bad[y] = _row(sa, lp, (ga, gb), prm, gv, seed, sample0, radius, out, y)
+
+
+@block
+def _row(sa, lp, grids, prm, gv, seed, sample0, radius, out, y):
+    hgt, w = radius.shape
+    nbad = 0
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    beams = np.empty((MAX_BEAMS, BEAM_COLS))
+    bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
+    obeams = np.empty((4, MAX_BEAMS, BEAM_COLS))
+    obstate = np.empty((4, MAX_BEAMS, 2), dtype=np.int64)
+    o_ok = np.zeros(4, dtype=np.bool_)
+    buf = np.empty(max(1, grids[0].order.shape[0], grids[1].order.shape[0]), dtype=np.int64)
+    for x in range(w):
+        for hh in range(2):
+            h = path_state(seed, y * w + x, sample0 + hh)
+            fx = x + rand_at(h, 0)
+            fy = y + rand_at(h, 1)
+            o, d, _ = camera_ray(sa.camera, fx, fy)
+            nb = beam_path(sa, prm, h, o, d, stack, beams, bstate)[11]
+            r = radius[y, x]
+            if nb == 0 or not r > 0.0:
+                continue
+            for k in range(4):
+                o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
+                                       beams, bstate, nb, obeams[k], obstate[k])
+            nbad += _samples(sa, lp, grids[hh], prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, buf, stack,
+                             out, hh, y, x)
+    return nbad
+
+
+@block
+def _offset_path(sa, prm, h, fx, fy, xo, yo, w, hgt, k, stack, beams, bstate, nb, ob, obs):
+    """Trace neighbour k's offset camera path (random replay from the film position +-1 pixel) into
+    ``ob``/``obs``; does it have the base's structure (beam count, media, classes)?"""
+    if not (0 <= xo < w and 0 <= yo < hgt):
+        return False                              # outside the image: a failed shift (E12)
+    o2, d2, _ = camera_ray(sa.camera, fx + SHIFT_DX[k], fy + SHIFT_DY[k])
+    nb2 = beam_path(sa, prm, h, o2, d2, stack, ob, obs)[11]
+    if nb2 != nb:
+        return False
+    for i in range(nb):
+        if ob[i, BEAM_MED] != beams[i, BEAM_MED] or obs[i, 0] != bstate[i, 0] or obs[i, 1] != bstate[i, 1]:
+            return False
+    return True
+
+
+@block
+def _beam_prob(beams, nb, b):
+    """P(b) of :func:`gdlearn.integrators.photon.volume_estimates._pick_beam` (max-component weights)."""
+    tot = 0.0
+    for i in range(nb):
+        tot += max(beams[i, BEAM_W], beams[i, BEAM_W + 1], beams[i, BEAM_W + 2])
+    if not tot > 0.0:
+        return 0.0
+    return max(beams[b, BEAM_W], beams[b, BEAM_W + 1], beams[b, BEAM_W + 2]) / tot
+
+
+@block
+def _point(beams, b, t):
+    return (beams[b, BEAM_O] + t * beams[b, BEAM_D], beams[b, BEAM_O + 1] + t * beams[b, BEAM_D + 1],
+            beams[b, BEAM_O + 2] + t * beams[b, BEAM_D + 2])
+
+
+@block
+def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
+    """The distance copy onto every neighbour's beam b: og[j] = (ok, d' (3), w'_c (3), camera factor
+    W' T(t) k0 (3), camera-side density ratio P'(b) p'(t) / (P(b) p(t)), the MIS weight of a null
+    shift -- which depends on the camera side only, so it is computed once per sample and neighbour)."""
+    obeams, o_ok = offs
+    for j in range(4):
+        og[j, 0] = 0.0
+        if not o_ok[j]:
+            continue
+        ob = obeams[j]
+        if not camera_distance_copy(t, ob[b, BEAM_S])[0]:
+            continue                          # the offset's beam is shorter than t (Eq. 15's failure)
+        ratio = _beam_prob(ob, nb, b) * truncated_distance_pdf(sbar, ob[b, BEAM_S], t) / (pb * pdf)
+        if not (ratio > 0.0 and math.isfinite(ratio)):
+            continue
+        p = _point(ob, b, t)
+        og[j, 0] = 1.0
+        for c in range(3):
+            og[j, 1 + c] = p[c]
+            og[j, 4 + c] = ob[b, BEAM_D + c]
+            og[j, 7 + c] = ob[b, BEAM_W + c] * tr[c] * k0
+        og[j, 10] = ratio
+        og[j, 11] = mis_weight_from_log_ratio(math.log(ratio))
+
+
+@block
+def _samples(sa, lp, grid, prm, gv, h, base, offs, r, buf, stack, out, hh, y, x):
+    """VPM's K distance samples of one camera path, their photons and the photons' shifts."""
+    beams, bstate, nb = base
+    og = np.empty((4, 12))
+    K = gv.samples
+    cnt = 0
+    nbad = 0
+    for k in range(K):
+        b, pb = _pick_beam(beams, nb, rand_at(h, D_VOL + 2 * k))
+        if b < 0:
+            break
+        med = int(beams[b, BEAM_MED])
+        sig, alb, g = medium_params(sa.media[med])
+        sbar = (sig[0] + sig[1] + sig[2]) / 3.0
+        if not sbar > 0.0:
+            continue
+        t, pdf = sample_distance_truncated_1(sbar, beams[b, BEAM_S], (k + rand_at(h, D_VOL + 2 * k + 1)) / K)
+        if not pdf > 0.0:
+            continue
+        tr = transmittance(sig, t)
+        k0 = 1.0 / (pdf * pb * K)
+        cw = (beams[b, BEAM_W] * tr[0] * k0, beams[b, BEAM_W + 1] * tr[1] * k0, beams[b, BEAM_W + 2] * tr[2] * k0)
+        _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og)
+        dg = _point(beams, b, t)
+        dc = (beams[b, BEAM_D], beams[b, BEAM_D + 1], beams[b, BEAM_D + 2])
+        m, state = int(bstate[b, 1]), bstate[b, 0]
+        for i in range(min(grid_query(grid, dg, r, buf), buf.shape[0])):
+            v = buf[i]
+            if not _admit(lp, v, prm, med, m, state):
+                continue
+            cnt += 1
+            ph = hg_eval(g, dc[0] * lp.d_in[v, 0] + dc[1] * lp.d_in[v, 1] + dc[2] * lp.d_in[v, 2])
+            c_b = (cw[0] * ph * lp.beta[v, 0], cw[1] * ph * lp.beta[v, 1], cw[2] * ph * lp.beta[v, 2])
+            if not _finite3(c_b):
+                nbad += 1
+                continue
+            _put(out.phi, hh, 0, y, x, c_b, 1.0)
+            nbad += _shift_photon(sa, lp, v, dg, g, r, gv.mixed, og, c_b, stack, out, hh, y, x)
+    out.m[hh, y, x] = cnt
+    return nbad
+
+
+@block
+def _shift_photon(sa, lp, v, dg, g, r, mixed, og, c_b, stack, out, hh, y, x):
+    """Photon row v (base term c_b) shifted to the four offset gather points og: D_k, S_k, counts."""
+    nbad = 0
+    bpos = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    for j in range(4):
+        c_o = (0.0, 0.0, 0.0)
+        ratio = 0.0
+        kind = NULL
+        ok = og[j, 0] > 0.0
+        if ok:
+            dp = (og[j, 1], og[j, 2], og[j, 3])
+            b2, kind = photon_shift(bpos, dg, dp, r, mixed)
+            f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+            if kind != NULL:
+                status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
+                ok = status == OK
+            if ok:
+                ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
+                c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
+                       og[j, 9] * ph * lp.beta[v, 2] * f3[2])
+                ratio = og[j, 10] * rl
+                if not (_finite3(c_o) and math.isfinite(ratio)):
+                    nbad += 1                                  # counted, never written
+                    ok = False
+                elif not ratio > 0.0:
+                    ok = False
+            if ok:
+                out.count[hh, C_NULL if kind == NULL else C_RECONNECTED, y, x] += 1
+                if kind == REFLECTED:
+                    out.count[hh, C_MIXED, y, x] += 1
+        if not ok:
+            out.count[hh, C_FAILED, y, x] += 1
+            _put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            continue
+        # Eq. 19, balance heuristic (a null shift's: the camera side's, og[j, 11])
+        wgt = og[j, 11] if kind == NULL else mis_weight_from_log_ratio(math.log(ratio))
+        _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
+        _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
+    return nbad
+
+
+@block
+def _put(buf, hh, i, y, x, v, scale):
+    for c in range(3):
+        buf[hh, i, y, x, c] += scale * v[c]
+
+
+@block
+def _finite3(v):
+    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
