@@ -196,3 +196,41 @@ def test_offset_photon_with_a_planted_bug_is_caught(tmp_path, bug):
     assert hint in out, out
     assert not any("shifted back from z' to z" in line or "never NaN" in line for line in failed), out
     assert len(failed) == len(failing), out
+
+
+#: the classic slips of the mixed-shift exercise (Gruson et al. 2018, Eq. 16): the reflection across
+#: the plane through d instead of d', the reflection forgotten (b' = b* for every photon outside K'),
+#: and the reflection decided by "b* outside K'" instead of "b* in K" (b* is always in K', so it never
+#: fires: the same map as the forgotten one, and the checks must name that reading too)
+_MIXED_SOLUTION = (SOLUTIONS_DIR / "mixed_shift.py").read_text()
+_MIXED_COMMON = ["across the plane through d'", "returns every photon", "uniform over K'", "compiled version"]
+MIXED_BUGS = {
+    "reflected through d": (
+        _MIXED_SOLUTION.replace("k = 2.0 * sum(u[i] * (d_off[i] - bs[i])", "k = 2.0 * sum(u[i] * (d[i] - bs[i])"),
+        _MIXED_COMMON + ["every image b'"], "reflected across the plane through d: the plane passes through d'"),
+    "reflection forgotten": (
+        _MIXED_SOLUTION.replace("    if not _dist2(bs, d) < r * r:                         # outside K: nothing else "
+                                "maps there\n        return bs, \"translated\"", "    return bs, \"translated\""),
+        _MIXED_COMMON, "the reflection is missing"),
+    "reflected whenever b* is outside K'": (
+        _MIXED_SOLUTION.replace("if not _dist2(bs, d) < r * r:", "if _dist2(bs, d_off) < r * r:"),
+        _MIXED_COMMON, "a test 'b* outside K'' never fires"),
+}
+
+
+@pytest.mark.parametrize("bug", sorted(MIXED_BUGS))
+def test_mixed_shift_with_a_planted_bug_is_caught(tmp_path, bug):
+    """A mixed shift that reflects across the plane through d, forgets the reflection, or reflects when
+    b* lies outside K' (never): the checks must fail the tests that see it (the hand value saying
+    which slip it is), and pass the others (the null and the translated branch are still right, and
+    without the reflection every image still lies in K')."""
+    source, failing, hint = MIXED_BUGS[bug]
+    assert source != _MIXED_SOLUTION, "the planted bug no longer matches the solution's text"
+    rc, out = check_exercise_source(tmp_path, "mixed-shift", source)
+    assert rc == 1, out
+    failed = [line for line in out.splitlines() if line.strip().startswith("FAIL")]
+    for label in failing:
+        assert any(label in line for line in failed), (label, out)
+    assert hint in out, out
+    assert not any("is kept (the null branch)" in line or "is translated, b'" in line for line in failed), out
+    assert len(failed) == len(failing), out
