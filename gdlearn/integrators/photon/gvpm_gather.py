@@ -54,8 +54,9 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
+from gdlearn.integrators.photon.gpm_gather import _finite3, _put
 from gdlearn.integrators.photon.gvpm_light import OK, reconnect
-from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam
+from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 from gdlearn.shifts.volume_photon import NULL, REFLECTED, camera_distance_copy, photon_shift, truncated_distance_pdf
@@ -144,10 +145,10 @@ def _beam_prob(beams, nb, b):
     """P(b) of :func:`gdlearn.integrators.photon.volume_estimates._pick_beam` (max-component weights)."""
     tot = 0.0
     for i in range(nb):
-        tot += max(beams[i, BEAM_W], beams[i, BEAM_W + 1], beams[i, BEAM_W + 2])
+        tot += beam_weight(beams, i)
     if not tot > 0.0:
         return 0.0
-    return max(beams[b, BEAM_W], beams[b, BEAM_W + 1], beams[b, BEAM_W + 2]) / tot
+    return beam_weight(beams, b) / tot
 
 
 @block
@@ -265,14 +266,3 @@ def _shift_photon(sa, lp, v, dg, g, r, mixed, og, c_b, stack, out, hh, y, x):
         _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
         _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
     return nbad
-
-
-@block
-def _put(buf, hh, i, y, x, v, scale):
-    for c in range(3):
-        buf[hh, i, y, x, c] += scale * v[c]
-
-
-@block
-def _finite3(v):
-    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])

@@ -161,16 +161,22 @@ def knn_point(lp, grid, prm, x, d_cam, medium, g, knn, rmax, m, state, kd, kv, b
 
 
 @block
+def beam_weight(beams, b):
+    """The selection weight of camera beam ``b``: the max component of its camera weight."""
+    return max(beams[b, BEAM_W], beams[b, BEAM_W + 1], beams[b, BEAM_W + 2])
+
+
+@block
 def _pick_beam(beams, nb, u):
-    """A beam with probability proportional to the max component of its camera weight; (b, P(b))."""
+    """A beam with probability proportional to :func:`beam_weight`; (b, P(b))."""
     tot = 0.0
     for b in range(nb):
-        tot += max(beams[b, BEAM_W], beams[b, BEAM_W + 1], beams[b, BEAM_W + 2])
+        tot += beam_weight(beams, b)
     if not tot > 0.0:
         return -1, 0.0
     x = u * tot
     for b in range(nb):
-        w = max(beams[b, BEAM_W], beams[b, BEAM_W + 1], beams[b, BEAM_W + 2])
+        w = beam_weight(beams, b)
         if x < w or b == nb - 1:
             return b, w / tot
         x -= w
