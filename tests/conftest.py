@@ -137,3 +137,17 @@ def check_exercise_source(tmp_path: Path, name: str, source: str) -> tuple[int, 
     res = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
                          timeout=EXERCISE_CHECK_TIMEOUT)
     return res.returncode, res.stdout + res.stderr
+
+
+def gradient_residuals(frame):
+    """Channel means of a gradient frame against its own base estimate: (gx - FD_x(base),
+    gy - FD_y(base), primal - base, gx, FD_x(base)), forward differences zero on the last
+    column / row (the fixed-radius unbiasedness checks of the photon estimators)."""
+    import numpy as np
+    pb = frame.images["primal_base"].mean(-1)
+    fdx = np.zeros_like(pb)
+    fdx[:, :-1] = pb[:, 1:] - pb[:, :-1]
+    fdy = np.zeros_like(pb)
+    fdy[:-1] = pb[1:] - pb[:-1]
+    gx, gy = frame.gx.mean(-1), frame.gy.mean(-1)
+    return np.stack([gx - fdx, gy - fdy, frame.primal.mean(-1) - pb, gx, fdx])

@@ -12,6 +12,7 @@ from gdlearn.integrators import make
 from gdlearn.integrators.base import render
 from gdlearn.scene.load import load
 from gdlearn.shifts.photon import offset_target, projection_jacobian
+from conftest import gradient_residuals
 
 #: a fixed radius for every pixel and no reduction (alpha = 1): each pass is an independent estimate
 #: of the image blurred by r, and the gradients must be unbiased for its differences
@@ -30,13 +31,7 @@ def runs(cornell):
     out = []
     for seed in range(N_SEEDS):
         f = render(make("gpm", cornell, seed=500 + seed, **FIXED), spp=16)
-        pb = f.images["primal_base"].mean(-1)
-        fdx = np.zeros_like(pb)
-        fdx[:, :-1] = pb[:, 1:] - pb[:, :-1]
-        fdy = np.zeros_like(pb)
-        fdy[:-1] = pb[1:] - pb[:-1]
-        gx, gy = f.gx.mean(-1), f.gy.mean(-1)
-        out.append(np.stack([gx - fdx, gy - fdy, f.primal.mean(-1) - pb, gx, fdx]))
+        out.append(gradient_residuals(f))
         last = f
     return np.array(out), last
 

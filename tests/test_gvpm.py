@@ -12,6 +12,7 @@ import pytest
 from gdlearn.integrators import make
 from gdlearn.integrators.base import render
 from gdlearn.scene.load import load
+from conftest import gradient_residuals
 
 #: one fixed radius for every pixel and no reduction (alpha = 1): each pass is an independent estimate
 #: of the medium radiance blurred by a ball of radius 0.25, and the gradients must be unbiased for
@@ -34,13 +35,7 @@ def _runs(scene, shift, seeds=N_SEEDS, spp=SPP, **kw):
     out = []
     for seed in range(seeds):
         f = render(make("gvpm", scene, seed=900 + seed, shift=shift, **{**FIXED, **kw}), spp=spp)
-        pb = f.images["primal_base"].mean(-1)
-        fdx = np.zeros_like(pb)
-        fdx[:, :-1] = pb[:, 1:] - pb[:, :-1]
-        fdy = np.zeros_like(pb)
-        fdy[:-1] = pb[1:] - pb[:-1]
-        gx, gy = f.gx.mean(-1), f.gy.mean(-1)
-        out.append(np.stack([gx - fdx, gy - fdy, f.primal.mean(-1) - pb, gx, fdx]))
+        out.append(gradient_residuals(f))
         last = f
     return np.array(out), last
 
