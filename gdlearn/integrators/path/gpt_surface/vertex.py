@@ -192,7 +192,7 @@ def vclass_of(sa, escaped, prim, cfg):
     return vertex_class(sa.materials[sa.prim_info[prim, 1]], cfg.threshold)
 
 
-@noalloc
+@leaf
 def same_delta_lobe(mat, wi, refl):
     """Sample the offset's delta lobe of the same kind as the base's (reflection if ``refl`` else
     transmission): the half-vector copy at a smooth interface (h = n, Jacobian 1). Returns
@@ -205,7 +205,12 @@ def same_delta_lobe(mat, wi, refl):
     return ZERO3, ZERO3, 0.0, False
 
 
-@noalloc
+# leaf (forceinline), as same_delta_lobe, mixed.replay_direction, halfvector.halfvector_copy* and
+# reconnection.reconnect: as plain non-inlined functions, shared with the volume kernel, LLVM inlined them
+# into the surface kernel only when that kernel compiled them first; after a fog-box render (the volume
+# kernel first, in one process or through the disk cache) the surface kernel called them with the scene
+# as ~100 scalars and ran 30 % slower (benchmarks/README.md, "gpt speed ... session 2")
+@leaf
 def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
     """Shift the segment leaving offset vertex k by ``action`` (base vertex ``bv``
     (:class:`~gdlearn.integrators.path.params.BaseVertex`): local wi_b -> wo_b sampled with density pdf_b
