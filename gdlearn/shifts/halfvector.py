@@ -36,7 +36,7 @@ import math
 from gdlearn.kernels import layout as L
 from gdlearn.kernels import vec
 from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric, refract_m
-from gdlearn.kernels.jit import block, ir_inline
+from gdlearn.kernels.jit import block, ir_inline, leaf
 
 ZERO3 = (0.0, 0.0, 0.0)
 #: |w_i + k w_o| below this (relative to 1 + k) is a degenerate half vector: h's direction would be
@@ -44,7 +44,7 @@ ZERO3 = (0.0, 0.0, 0.0)
 DEGENERATE_H = 1e-9
 
 
-@block
+@leaf
 def half_vector(wi, wo, eta):
     """``(h, k, ok)``: Walter's generalised half vector of (wi, wo) in the local frame, +z oriented;
     k = 1 for reflection (wi, wo on one side), eta_it for refraction through relative index eta."""
@@ -68,7 +68,7 @@ def dh_dwo(wi, wo, h, k):
     return k * k * abs(vec.dot(wo, h)) / (den * den)
 
 
-@block
+@leaf
 def halfvector_copy(wi_b, wo_b, wi_o, eta, transmissive):
     """Shift the outgoing direction at one vertex by copying the half vector (Eq. 15).
 
@@ -127,7 +127,7 @@ def halfvector_copy_world(ns_b, wi_b, wo_b, ns_o, wi_o, eta, transmissive):
     return vec.normalize(vec.to_world(wo, so, to, ns_o)), j, True
 
 
-@block
+@leaf
 def halfvector_copy_mat(mat, wi_b, wo_b, wi_o, is_delta):
     """Half-vector copy at a vertex with material row ``mat`` (local frame). For a delta lobe the
     returned Jacobian is 1: the direction carries a discrete probability, not a density."""

@@ -26,7 +26,7 @@ import math
 from gdlearn.kernels import layout as L
 from gdlearn.kernels import vec
 from gdlearn.shifts.path import abs_cos
-from gdlearn.kernels.jit import block, ir_inline
+from gdlearn.kernels.jit import block, ir_inline, leaf
 
 
 @ir_inline
@@ -41,7 +41,7 @@ def can_reconnect(class_b, class_b_offset, class_y):
     return connectable(class_b) and connectable(class_b_offset) and connectable(class_y)
 
 
-@block
+@leaf
 def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
     """|dw'/dw| of the reconnection in the solid-angle measure at x_b (the solid-angle form in the
     module docstring: Jacobian 1 in area, STAR Sec. 3.3, times dA = d^2/|cos| dw on both paths).
@@ -59,7 +59,7 @@ def reconnection_jacobian_solid_angle(x_b, x_b_offset, y, n_y):
     return (co / c) * (d2 / do2)
 
 
-@block
+@leaf
 def reconnect(x_b, x_b_offset, y, n_y):
     """Shift the segment x_b -> y to x'_b -> y.
 

@@ -44,10 +44,10 @@ from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.integrators.path.gpt_surface.vertex import (ALIVE, BROKEN_LOBE_CLASS, BROKEN_MANIFOLD_JACOBIAN,
                                                          BROKEN_MIS, BROKEN_PRIMAL, BROKEN_REVERSIBILITY,
-                                                         BROKEN_UNPAIRED, FAILED, I_PENDING, OUTSIDE, VIS_UNKNOWN,
-                                                         follow_base, nee_at_vis, set_hit)
+                                                         BROKEN_UNPAIRED, F_W, FAILED, I_PENDING, OUTSIDE, VIS_UNKNOWN,
+                                                         follow_base, follow_merged, nee_at_vis, set_hit, start_weights)
 from gdlearn.integrators.path.gpt_surface.mixed import shift_segment_mixed, unpaired
-from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_LR, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                                          I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
                                                          I_STATE, JOINED, MERGED, FREE, emitted, get3, mul3, nee_at,
                                                          relabel, replayed_class, sc3, set3, shift_direction, vclass_of,
@@ -56,11 +56,10 @@ from gdlearn.shifts.policy import conn, decide
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
 from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, same_direction_point, sample_emitter
 from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
-from gdlearn.kernels.rng import rand
+from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.scene_query import intersect
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
-from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.integrators.path.gpt_surface.manifold import lookahead_chain, manifold_offset, same_shape
 from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
@@ -92,7 +91,7 @@ def _start_offsets(sa, px, of, oi, stack):
         hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
         set_hit(sa, of, oi, k, hit, prim, p, ng, ns, d)
         set3(of, k, F_BETA, ONE3)
-        of[k, F_LR] = 0.0
+        start_weights(of, k)
         of[k, F_PREV_PDF] = 1.0
         set3(of, k, F_PREV_P, o)
         oi[k, I_PREV_DELTA] = 1
@@ -106,9 +105,12 @@ def _start_offsets(sa, px, of, oi, stack):
 def _pair(diff, of, oi, k, co, cb, cfg):
     """Eq. 16 with Eq. 17's weight for one technique: ``diff[k] += w (C' - C)`` (-C for a failed
     shift), and the weighted offset contribution ``diff[4 + k] += w C'`` (0 for a failed shift) that
-    the MIS primal of Kettunen et al. 2015 gives to the neighbour (:func:`gdlearn.integrators.path.gpt.mis_primal`)."""
+    the MIS primal of Kettunen et al. 2015 gives to the neighbour (:func:`gdlearn.integrators.path.gpt.mis_primal`).
+    A pair of zeros (most emission pairs: no emitter at either vertex) adds nothing and is skipped."""
+    if co[0] == 0.0 and co[1] == 0.0 and co[2] == 0.0 and cb[0] == 0.0 and cb[1] == 0.0 and cb[2] == 0.0:
+        return
     if oi[k, I_ALIVE] == ALIVE:
-        wgt = 1.0 if cfg.broken == BROKEN_MIS else mis_weight_from_log_ratio(of[k, F_LR])
+        wgt = 1.0 if cfg.broken == BROKEN_MIS else of[k, F_W]      # Eq. 17 of lr (vertex._update keeps it)
         for c in range(3):
             diff[k, c] += wgt * (co[c] - cb[c])
             diff[4 + k, c] += (1.0 if cfg.broken == BROKEN_PRIMAL else wgt) * co[c]
@@ -118,11 +120,16 @@ def _pair(diff, of, oi, k, co, cb, cfg):
 
 
 @leaf
-def _emission_pairs(sa, of, oi, diff, cb, cfg):
+def _emission_pairs(sa, of, oi, diff, cb, le_b, cfg):
+    """The emission pairs of one vertex: ``cb`` the base's term, ``le_b`` the MIS-weighted Le it saw
+    (:func:`emitted`), which a MERGED offset sees too: same vertex, same previous vertex and density."""
     for k in range(4):
         co = (0.0, 0.0, 0.0)
         # a pending manifold offset already sits at x_c; the base crosses the chain (no emitters) first
         if oi[k, I_ALIVE] == ALIVE and oi[k, I_PENDING] == 0 and _wanted(cfg, oi[k, I_STATE]):
+            if oi[k, I_RECONN] == MERGED:
+                _pair(diff, of, oi, k, mul3(get3(of, k, F_BETA), le_b), cb, cfg)
+                continue
             wi = get3(of, k, F_WI)
             le = emitted(sa, oi[k, I_ESCAPED] == 1, oi[k, I_PRIM], get3(of, k, F_POS), get3(of, k, F_NS),
                          (-wi[0], -wi[1], -wi[2]), get3(of, k, F_PREV_P), of[k, F_PREV_PDF],
@@ -274,12 +281,12 @@ def _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, d
     """The base's next-event sample at vertex p (``surface_path.nee_surface``'s random numbers, ``rng``:
     :class:`~gdlearn.integrators.path.params.PathRng`) and its shifts (:func:`_nee_pairs`); returns the base
     contribution."""
-    seed, key, s = rng.seed, rng.key, rng.s
+    h = path_state(rng.seed, rng.key, rng.s)     # the caller's, after inlining
     n_em = sa.emitters.shape[0]
-    u_sel = rand(seed, key, s, dim(depth, D_EM_SEL))
+    u_sel = rand_at(h, dim(depth, D_EM_SEL))
     em_b, q, nq, _, _, _, _, _, _ = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel,
-        rand(seed, key, s, dim(depth, D_EM_U1)), rand(seed, key, s, dim(depth, D_EM_U2)))
+        rand_at(h, dim(depth, D_EM_U1)), rand_at(h, dim(depth, D_EM_U2)))
     # the chosen emitter even when the sample is black for the base (back side): an offset may
     # still see the light point's front
     em = min(int(u_sel * n_em), n_em - 1)
@@ -324,6 +331,8 @@ def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
         if oi[k, I_PENDING] > 0:             # moved to x_c already: wait for the base
             oi[k, I_PENDING] -= 1
             continue
+        if oi[k, I_RECONN] == MERGED:        # moved by the caller (_follow_merged_all)
+            continue
         if mtab is not None:              # None: this specialisation has no manifold code (gpt_sample)
             if m > 0 and oi[k, I_RECONN] == FREE and oi[k, I_ESCAPED] == 0:
                 _manifold_segment(sa, mtab, k, of, oi, m, cf, ci, cfg, bv, stats, stack)
@@ -336,6 +345,24 @@ def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
             shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack)
         else:
             _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack)
+
+
+@leaf
+def _follow_merged_all(sa, of, oi, bv, nx):
+    """Move every MERGED offset along the base's segment x_b -> x_{b+1} (``vertex.follow_merged``, then
+    x_{b+1} as its vertex). Returns True when another live offset needs :func:`_shift_offsets`: once
+    all offsets have merged (or failed), the per-bounce cost of the four is a few multiplications, and
+    the large, non-inlined shift function is not entered at all."""
+    need = False
+    for k in range(4):
+        if oi[k, I_ALIVE] != ALIVE:
+            continue
+        if oi[k, I_RECONN] != MERGED or oi[k, I_PENDING] > 0:
+            need = True
+            continue
+        follow_merged(of, oi, k, bv)
+        set_hit(sa, of, oi, k, nx.hit, nx.prim, nx.p, nx.ng, nx.ns, nx.d)
+    return need
 
 
 @leaf
@@ -363,7 +390,7 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     compile) is compiled only for the manifold kernel. Compiled without reference counting, as are
     the callees that inherit numba's flags from it; the walk's ``manifold_offset``, which allocates
     its scratch arrays, asks for them itself."""
-    seed, key, s = rng.seed, rng.key, rng.s
+    h = path_state(rng.seed, rng.key, rng.s)     # hashed once: each number is then one finaliser (rng)
     diff[:] = 0.0
     o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
     hit, _, prim, p, ng, ns, _ = intersect(sa, o, d, 0.0, tmax, stack)
@@ -377,10 +404,11 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     n_em = sa.emitters.shape[0]
     while True:
         cb = (0.0, 0.0, 0.0)
+        le_b = emitted(sa, not hit, prim, p, ns, d, prev_p, prev_pdf, prev_delta)
         if _wanted(cfg, state):
-            cb = mul3(beta, emitted(sa, not hit, prim, p, ns, d, prev_p, prev_pdf, prev_delta))
+            cb = mul3(beta, le_b)
         L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-        _emission_pairs(sa, of, oi, diff, cb, cfg)
+        _emission_pairs(sa, of, oi, diff, cb, le_b, cfg)
         if not hit or depth + 1 >= cfg.max_depth:
             break
         mat = sa.materials[sa.prim_info[prim, 1]]
@@ -391,9 +419,9 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
         if not bsdf_is_delta_only(mat) and n_em > 0:
             cb = _next_event(sa, p, ng, ns, wi_world, mat, beta, state, rng, depth, of, oi, diff, cfg, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-        u_lobe = rand(seed, key, s, dim(depth, D_LOBE))
-        u1 = rand(seed, key, s, dim(depth, D_BSDF_U1))
-        u2 = rand(seed, key, s, dim(depth, D_BSDF_U2))
+        u_lobe = rand_at(h, dim(depth, D_LOBE))
+        u1 = rand_at(h, dim(depth, D_BSDF_U1))
+        u2 = rand_at(h, dim(depth, D_BSDF_U2))
         wo, weight, pdf, delta = bsdf_sample(mat, wi, u_lobe, u1, u2)
         if not pdf > 0.0:
             break
@@ -411,7 +439,8 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
             if cfg.policy == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD and conn(cls_s) and hit2 and \
                     vclass_of(sa, False, prim2, cfg) == V_SPECULAR and _any_free(oi):
                 m = lookahead_chain(sa, mtab, nx, rng, depth + 1, cfg, cf, ci, stack)
-        _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci)
+        if _follow_merged_all(sa, of, oi, bv, nx):
+            _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci)
         beta = mul3(beta, weight)
         eta *= bsdf_eta(mat, wi, wo)
         prev_p, prev_pdf, prev_delta = p, pdf, delta
@@ -419,7 +448,7 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
         hit, prim, p, ng, ns, d = hit2, prim2, p2, ng2, ns2, d2
         depth += 1
         if depth >= cfg.rr_depth:
-            q_rr = _roulette(of, oi, beta, eta, rand(seed, key, s, dim(depth - 1, D_RR)))
+            q_rr = _roulette(of, oi, beta, eta, rand_at(h, dim(depth - 1, D_RR)))
             if q_rr == 0.0:
                 break
             beta = sc3(beta, 1.0 / q_rr)

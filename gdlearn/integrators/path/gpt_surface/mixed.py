@@ -58,12 +58,12 @@ from gdlearn.kernels.scene_query import intersect, occluded
 from gdlearn.kernels.vec import coordinate_system, to_local, to_world
 from gdlearn.shifts.policy import SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY, mixed_action, mixed_decide, record
 from gdlearn.shifts.reconnection import reconnect
-from gdlearn.kernels.jit import leaf, noalloc
+from gdlearn.kernels.jit import leaf
 
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@noalloc
+@leaf
 def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, cfg):
     """Random replay at offset vertex k (Sec. 3.1): the base's numbers through the offset's own BSDF,
     any lobe (delta or not, whatever the base's was). beta' *= f'/p' (= f' J / p_b with J = p_b / p');

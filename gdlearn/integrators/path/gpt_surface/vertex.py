@@ -14,7 +14,9 @@ lobe or a shared direction, and 1 for the light point (area measure, STAR Sec. 3
 Offset state (one row per neighbour, arrays ``of`` float64 and ``oi`` int64, columns below): the
 offset vertex, its incoming direction, the offset throughput ``beta' = prod f'_j J_j / p_j`` (base
 densities p_j, so beta' * Le is f(T x) |J| / p(x) of Eq. 16), and ``lr = sum log(p'_j J_j / p_j)``,
-the log of the density ratio that Eq. 17's MIS weight needs (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`).
+the log of the density ratio that Eq. 17's MIS weight needs (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`),
+with that weight ``w`` kept beside it: lr changes once per shifted segment, the weight is read by every
+technique of every later vertex (an ``exp`` each, ~5 % of a Cornell-box sample before it was kept).
 """
 import math
 
@@ -31,6 +33,7 @@ from gdlearn.kernels.sampling import power_heuristic
 from gdlearn.kernels.scene_query import occluded
 from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
 from gdlearn.shifts.halfvector import halfvector_copy_mat
+from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.policy import ESCAPED, SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY
 from gdlearn.shifts.reconnection import connectable, reconnect
 from gdlearn.kernels.jit import leaf, noalloc
@@ -49,8 +52,8 @@ ZERO3 = (0.0, 0.0, 0.0)
  BROKEN_REVERSIBILITY, BROKEN_LOBE_CLASS, BROKEN_UNPAIRED, BROKEN_REPLAY_WEIGHT) = range(10)
 
 # float columns of ``of``
-F_POS, F_NG, F_NS, F_WI, F_BETA, F_LR, F_PREV_PDF, F_PREV_P = 0, 3, 6, 9, 12, 15, 16, 17
-NF = 20
+F_POS, F_NG, F_NS, F_WI, F_BETA, F_LR, F_PREV_PDF, F_PREV_P, F_W = 0, 3, 6, 9, 12, 15, 16, 17, 20
+NF = 21
 # int columns of ``oi`` (I_PENDING: base segments left until the base reaches the vertex a manifold
 # shift already moved the offset to, :mod:`gdlearn.integrators.path.gpt_surface.manifold`)
 I_ALIVE, I_MAT, I_RECONN, I_PREV_DELTA, I_ESCAPED, I_STATE, I_PRIM, I_PENDING = range(8)
@@ -189,7 +192,7 @@ def vclass_of(sa, escaped, prim, cfg):
     return vertex_class(sa.materials[sa.prim_info[prim, 1]], cfg.threshold)
 
 
-@noalloc
+@leaf
 def same_delta_lobe(mat, wi, refl):
     """Sample the offset's delta lobe of the same kind as the base's (reflection if ``refl`` else
     transmission): the half-vector copy at a smooth interface (h = n, Jacobian 1). Returns
@@ -202,7 +205,12 @@ def same_delta_lobe(mat, wi, refl):
     return ZERO3, ZERO3, 0.0, False
 
 
-@noalloc
+# leaf (forceinline), as same_delta_lobe, mixed.replay_direction, halfvector.halfvector_copy* and
+# reconnection.reconnect: as plain non-inlined functions, shared with the volume kernel, LLVM inlined them
+# into the surface kernel only when that kernel compiled them first; after a fog-box render (the volume
+# kernel first, in one process or through the disk cache) the surface kernel called them with the scene
+# as ~100 scalars and ran 30 % slower (benchmarks/README.md, "gpt speed ... session 2")
+@leaf
 def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
     """Shift the segment leaving offset vertex k by ``action`` (base vertex ``bv``
     (:class:`~gdlearn.integrators.path.params.BaseVertex`): local wi_b -> wo_b sampled with density pdf_b
@@ -293,10 +301,19 @@ def replayed_class(of, k, mat_o, u_lobe, delta_o, lcls, cfg):
 @leaf
 def _update(of, k, f, j, pdf_o, pdf_b):
     """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0: Eq. 17 then
-    gives the base weight 1, as it must for a path the neighbour's tracer never samples)."""
+    gives the base weight 1, as it must for a path the neighbour's tracer never samples); the weight
+    w = 1 / (1 + exp(lr)) follows lr (the only writer of lr after :func:`start_weights`)."""
     set3(of, k, F_BETA, sc3(mul3(get3(of, k, F_BETA), f), j / pdf_b))
     r = pdf_o * j / pdf_b
     of[k, F_LR] += math.log(r) if r > 0.0 else -math.inf
+    of[k, F_W] = mis_weight_from_log_ratio(of[k, F_LR])
+
+
+@leaf
+def start_weights(of, k):
+    """lr = 0 and its weight 1/2 (Eq. 17 for equal densities) for an offset at the pixel shift."""
+    of[k, F_LR] = 0.0
+    of[k, F_W] = mis_weight_from_log_ratio(0.0)
 
 
 @leaf
@@ -322,9 +339,19 @@ def follow_base(sa, k, of, oi, bv, cfg):
         oi[k, I_PREV_DELTA] = 0
         oi[k, I_STATE] = pc_push(oi[k, I_STATE], lcls)
         oi[k, I_RECONN] = MERGED
-    else:                                   # identical to the base: f' / p = the base's weight
-        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight))
-        of[k, F_PREV_PDF] = pdf
-        oi[k, I_PREV_DELTA] = 1 if delta else 0
-        oi[k, I_STATE] = pc_push(oi[k, I_STATE], cls_b)
+    else:
+        follow_merged(of, oi, k, bv)
+        return
     set3(of, k, F_PREV_P, p)
+
+
+@leaf
+def follow_merged(of, oi, k, bv):
+    """A MERGED offset (identical to the base from x_b on) follows the base's segment leaving x_b:
+    f' / p = the base's weight. No ray, no BSDF evaluation (the reference implementation's cost of
+    a reconnected offset); the caller moves its vertex to x_{b+1} (:func:`set_hit`)."""
+    set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), bv.weight))
+    of[k, F_PREV_PDF] = bv.pdf
+    oi[k, I_PREV_DELTA] = 1 if bv.delta else 0
+    oi[k, I_STATE] = pc_push(oi[k, I_STATE], bv.cls_b)
+    set3(of, k, F_PREV_P, bv.x)

@@ -61,7 +61,7 @@ from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
-from gdlearn.kernels.jit import block, noalloc, rows
+from gdlearn.kernels.jit import block, leaf, noalloc, rows
 from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM, VB_SURFACE, BaseVertex, NextVertex, PathRng, Pixel
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -235,6 +235,16 @@ def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, 
     return cb
 
 
+@leaf
+def _any_free(oi):
+    """Does a live offset still shift on its own (FREE)? Only then is the base flight's log density
+    needed (joined and merged offsets follow the base's flight with its weight)."""
+    for k in range(4):
+        if oi[k, I_ALIVE] == ALIVE and oi[k, I_RECONN] == FREE:
+            return True
+    return False
+
+
 @noalloc
 def _roulette_all(of, oi, beta, eta, depth, cfg, u):
     """Mitsuba's roulette q = min(max throughput eta^2, 0.95) with the max over the base *and* the
@@ -277,7 +287,7 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
     while True:
         seg0 = seg
         ev, seg, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, rng, seg,
-                                                                           stack)
+                                                                           stack, _any_free(oi))
         tmax = math.inf
         if ev == EV_FAIL:
             break

@@ -51,7 +51,7 @@ def replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack):
     base's flight (which ended at segment seg_b)."""
     d = get3(of, k, F_D)
     ev, seg, med, _, W, _, _, prim, p, ng, ns = base_flight(sa, get3(of, k, F_O), d, of[k, F_TMAX], oi[k, I_MED],
-                                                            ONE3, rng, seg0, stack)
+                                                            ONE3, rng, seg0, stack, False)   # log p unused
     if ev == EV_FAIL or seg != seg_b:
         return False
     if cfg.broken != BROKEN_REPLAY_WEIGHT:

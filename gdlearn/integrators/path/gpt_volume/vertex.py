@@ -14,7 +14,7 @@ import math
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_is_delta_only, bsdf_pdf, lobe_class, vertex_class
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
-from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, BROKEN_UNPAIRED, F_BETA, F_LR,
+from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_PRIMAL, BROKEN_UNPAIRED, F_BETA, F_LR, F_W,
                                        F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED, I_MAT,
                                        I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, JOINED, MERGED, FREE, NF, NI, get3,
                                        light_weight, mul3, sc3, set3)
@@ -37,9 +37,11 @@ ZERO3 = (0.0, 0.0, 0.0)
 ONE3 = (1.0, 1.0, 1.0)
 #: alive flags: shift not traced (outside the image), failed, alive
 OUTSIDE, FAILED, ALIVE = -1, 0, 1
-#: extra float columns: the offset's current ray
-F_O, F_D, F_TMAX = NF, NF + 3, NF + 6
-NFV = NF + 7
+#: extra float columns: the offset's current ray; the log ratio F_WLR for which the Eq. 17 weight F_W
+#: (``gpt_surface.vertex``'s column) was computed (:func:`pair` recomputes it only when lr has changed:
+#: lr changes once per shifted segment, the weight is read by every technique of every vertex after it)
+F_O, F_D, F_TMAX, F_WLR = NF, NF + 3, NF + 6, NF + 7
+NFV = NF + 8
 #: extra int columns: medium of the ray / medium vertex, vertex kind
 I_MED, I_KIND = NI, NI + 1
 NIV = NI + 2
@@ -90,6 +92,8 @@ def start_offsets(sa, px, of, oi):
         of[k, F_TMAX] = tmax
         set3(of, k, F_BETA, ONE3)
         of[k, F_LR] = 0.0
+        of[k, F_WLR] = 0.0
+        of[k, F_W] = mis_weight_from_log_ratio(0.0)
         of[k, F_PREV_PDF] = 1.0
         set3(of, k, F_PREV_P, o)
         oi[k, I_PREV_DELTA] = 1
@@ -132,9 +136,16 @@ def scale_log(of, k, log_f, log_p):
 @noalloc
 def pair(diff, summ, of, oi, k, co, cb, cfg):
     """Eq. 16 with Eq. 17's weight for one technique: D += w (C' - C), S += w C'; a failed shift
-    D -= C (w = 1, offset 0). w = 0 (offset density overwhelming) adds nothing, even if C' overflowed."""
+    D -= C (w = 1, offset 0). w = 0 (offset density overwhelming) adds nothing, even if C' overflowed.
+    A pair of zeros adds nothing and is skipped."""
+    if co[0] == 0.0 and co[1] == 0.0 and co[2] == 0.0 and cb[0] == 0.0 and cb[1] == 0.0 and cb[2] == 0.0:
+        return
     if oi[k, I_ALIVE] == ALIVE:
-        wgt = 1.0 if cfg.broken == BROKEN_MIS else mis_weight_from_log_ratio(of[k, F_LR])
+        lr = of[k, F_LR]
+        if lr != of[k, F_WLR]:            # (NaN: recomputed every time, weight 1)
+            of[k, F_W] = mis_weight_from_log_ratio(lr)
+            of[k, F_WLR] = lr
+        wgt = 1.0 if cfg.broken == BROKEN_MIS else of[k, F_W]
         if wgt > 0.0:
             ws = 1.0 if cfg.broken == BROKEN_PRIMAL else wgt
             for c in range(3):
