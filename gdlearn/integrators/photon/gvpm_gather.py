@@ -29,6 +29,12 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    proper, not unbiased where they were not.) The offset contribution itself uses the base's
    densities (f(T x) |J| / p(x), |J| = 1).
 
+Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample's photons are
+collected once (row and base term, per-row scratch), then each neighbour runs over them with its
+D_k, S_k and counts in registers, summed in photon order -- the buffers are bit for bit those of
+one write per photon and shift (tests/test_gvpm_fast.py against tests/_gvpm_reference.py) --, and
+a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_light.base_edge``).
+
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
 VPM does); ``count`` the photon shifts: null (b' = b), mixed (reflected by Eq. 16; they are also
@@ -292,28 +298,11 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
         if v < 0:
             continue
         c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
-        c_o = (0.0, 0.0, 0.0)
-        ratio = 0.0
-        ok = cam
-        kind = NULL
-        if ok:
-            b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
-            f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
-            if kind != NULL:
-                if scr.edge[i, 0] == EDGE_UNKNOWN:
-                    store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
-                status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
-                ok = status == OK
-            if ok:
-                ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
-                c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
-                       og[j, 9] * ph * lp.beta[v, 2] * f3[2])
-                ratio = og[j, 10] * rl
-                if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
-                    nbad += 1                                  # counted, never written
-                    ok = False
-                elif not ratio > 0.0:
-                    ok = False
+        if cam:
+            ok, kind, c_o, ratio, bad = _offset_term(sa, lp, scr, i, v, dg, dp, g, r, mixed, og, j, stack)
+        else:                                                  # the camera side failed: every photon does
+            ok, kind, c_o, ratio, bad = False, NULL, (0.0, 0.0, 0.0), 0.0, 0
+        nbad += bad
         if not ok:
             n_fail += 1
             d0 += -1.0 * c_b[0]                                # w = 1, no offset (PHOTONS.md Sec. 0.2)
@@ -340,3 +329,25 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
     out.count[hh, C_RECONNECTED, y, x] += n_rec
     out.count[hh, C_FAILED, y, x] += n_fail
     return nbad
+
+
+@inlined
+def _offset_term(sa, lp, scr, i, v, dg, dp, g, r, mixed, og, j, stack):
+    """Photon v (scratch row i) shifted to neighbour j's gather point dp: (ok, shift kind, offset term
+    c_o, offset / base density ratio, 1 if a non-finite term was dropped). The recorded edge a -> b is
+    walked the first time a neighbour reconnects the photon and kept in the scratch for the others."""
+    b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
+    f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+    if kind != NULL:
+        if scr.edge[i, 0] == EDGE_UNKNOWN:
+            store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
+        status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
+        if status != OK:
+            return False, kind, (0.0, 0.0, 0.0), 0.0, 0
+    ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
+    c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
+           og[j, 9] * ph * lp.beta[v, 2] * f3[2])
+    ratio = og[j, 10] * rl
+    if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
+        return False, kind, c_o, ratio, 1                  # counted, never written
+    return ratio > 0.0, kind, c_o, ratio, 0
