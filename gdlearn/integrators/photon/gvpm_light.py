@@ -92,7 +92,7 @@ def _ancestor(sa, lp, v):
         child = q
         q = lp.parent[q]
         n += 1
-    return q, child, n
+    return int(q), child, n         # int64 (lp.parent is int32): one _spawn specialisation for every caller
 
 
 @inlined
