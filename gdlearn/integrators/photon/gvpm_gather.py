@@ -298,11 +298,28 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
         if v < 0:
             continue
         c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
-        if cam:
-            ok, kind, c_o, ratio, bad = _offset_term(sa, lp, scr, i, v, dg, dp, g, r, mixed, og, j, stack)
-        else:                                                  # the camera side failed: every photon does
-            ok, kind, c_o, ratio, bad = False, NULL, (0.0, 0.0, 0.0), 0.0, 0
-        nbad += bad
+        c_o = (0.0, 0.0, 0.0)
+        ratio = 0.0
+        ok = cam
+        kind = NULL
+        if ok:
+            b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
+            f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+            if kind != NULL:
+                if scr.edge[i, 0] == EDGE_UNKNOWN:
+                    store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
+                status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
+                ok = status == OK
+            if ok:
+                ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
+                c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
+                       og[j, 9] * ph * lp.beta[v, 2] * f3[2])
+                ratio = og[j, 10] * rl
+                if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
+                    nbad += 1                                  # counted, never written
+                    ok = False
+                elif not ratio > 0.0:
+                    ok = False
         if not ok:
             n_fail += 1
             d0 += -1.0 * c_b[0]                                # w = 1, no offset (PHOTONS.md Sec. 0.2)
@@ -329,25 +346,3 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
     out.count[hh, C_RECONNECTED, y, x] += n_rec
     out.count[hh, C_FAILED, y, x] += n_fail
     return nbad
-
-
-@inlined
-def _offset_term(sa, lp, scr, i, v, dg, dp, g, r, mixed, og, j, stack):
-    """Photon v (scratch row i) shifted to neighbour j's gather point dp: (ok, shift kind, offset term
-    c_o, offset / base density ratio, 1 if a non-finite term was dropped). The recorded edge a -> b is
-    walked the first time a neighbour reconnects the photon and kept in the scratch for the others."""
-    b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
-    f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
-    if kind != NULL:
-        if scr.edge[i, 0] == EDGE_UNKNOWN:
-            store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
-        status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
-        if status != OK:
-            return False, kind, (0.0, 0.0, 0.0), 0.0, 0
-    ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
-    c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
-           og[j, 9] * ph * lp.beta[v, 2] * f3[2])
-    ratio = og[j, 10] * rl
-    if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
-        return False, kind, c_o, ratio, 1                  # counted, never written
-    return ratio > 0.0, kind, c_o, ratio, 0
