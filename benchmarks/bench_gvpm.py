@@ -8,10 +8,29 @@ statistics (null / mixed / reconnected / failed, per gathered photon and neighbo
 
     flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py [--scenes scenes/fog-box.xml,...]
         [--res 128] [--photons 100000] [--repeats 3] [--threads 2]
+
+``--equal-time S``: vpm, gvpm+l1, gvpm+l2 (the mixed shift) and bre (3D kernel), all with
+``--transport media``, for S seconds each (JIT excluded, the reconstruction included: the
+experiments module stops rendering early enough for it) on every ``--scenes`` scene, ``--seeds``
+seeds interleaved seed by seed, all at ``--threads`` threads. The reference is a long vpm run
+(``--ref-passes`` passes of ``--ref-photons`` light paths, seed 1000003, independent of the runs)
+rendered once and cached on disk under the benchmark's own folder (``$GDLEARN_CACHE`` or
+``~/.cache/gdlearn``, then ``bench_gvpm/``), keyed by the scene, the resolution, the budget and the
+sources of VPM's pipeline (so an edit of the G-VPM kernels keeps it, an edit of VPM's does not).
+Prints each method's final relMSE per seed, the ratio vpm / method (> 1: lower error than VPM),
+its mean, min and max over the seeds, and the same with the reference's noise floor subtracted
+from both errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R).
+The methods' order rotates from seed to seed. ``--refs-only`` renders (and caches) the references
+and stops: keep each locked run under a few minutes by rendering the references, then each scene
+(or a part of its seeds, ``--first-seed``), in runs of their own.
+
+    flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py --equal-time 20 --res 128 \
+        --seeds 3 --scenes scenes/spot-medium.xml
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import statistics
 import sys
@@ -57,6 +76,101 @@ def pass_times(path, a) -> None:
               f"{c['failed'] / tot:.1%}; gathered photons {st['volume_photons_gathered']}", flush=True)
 
 
+#: the sources a vpm reference depends on (its cache key): VPM's camera pass, volume estimates, photons
+REF_SOURCES = ("gdlearn/integrators/photon/volumetric.py", "gdlearn/integrators/photon/volume_gather.py",
+               "gdlearn/integrators/photon/volume_estimates.py", "gdlearn/integrators/photon/camera_beams.py",
+               "gdlearn/integrators/photon/sppm.py", "gdlearn/photons", "gdlearn/kernels/media")
+REF_SEED = 1_000_003
+
+
+def _ref_key(path, a) -> str:
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    h = hashlib.sha256(f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}".encode())
+    h.update(open(path, "rb").read())
+    for src in REF_SOURCES:
+        full = os.path.join(root, src)
+        files = [full] if os.path.isfile(full) else sorted(
+            os.path.join(d, f) for d, _, fs in os.walk(full) for f in fs if f.endswith(".py"))
+        for f in files:
+            h.update(open(f, "rb").read())
+    return h.hexdigest()[:20]
+
+
+def vpm_reference(path, a):
+    """The long vpm run of ``path`` (module docstring), from the cache or rendered now."""
+    import numpy as np
+
+    from gdlearn.experiments.references import Reference, cache_dir, load_reference
+    from gdlearn.integrators.base import render
+
+    folder = cache_dir().parent / "bench_gvpm"
+    file = folder / f"{os.path.basename(path)}-{a.res}-{_ref_key(path, a)}.npz"
+    if file.is_file():
+        return load_reference(file), 0.0
+    t0 = time.perf_counter()
+    integ = make("vpm", load(path, res=a.res), seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads,
+                 transport="media")
+    frame = render(integ, spp=2 * a.ref_passes)
+    if not np.isfinite(frame.primal).all():
+        raise RuntimeError(f"{path}: the vpm reference has non-finite pixels")
+    ref = Reference(frame.primal, frame.variance(), frame.spp, "vpm", file.stem)
+    folder.mkdir(parents=True, exist_ok=True)
+    ref.save(file)
+    return ref, time.perf_counter() - t0
+
+
+def equal_time_study(a) -> int:
+    """vpm vs gvpm+l1, gvpm+l2 and bre-3d at equal time (module docstring)."""
+    import numpy as np
+
+    from gdlearn.experiments import SceneFile, equal_time
+    from gdlearn.experiments.study import Method
+
+    opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("transport", "media"))
+    every = {"vpm": Method("vpm", "vpm", None, opts), "gvpm+l1": Method("gvpm+l1", "gvpm", "l1", opts),
+             "gvpm+l2": Method("gvpm+l2", "gvpm", "l2", opts),
+             "bre-3d": Method("bre-3d", "bre", None, opts + (("kernel", "3d"),))}
+    names = a.methods.split(",")
+    if names[0] != "vpm" or any(n not in every for n in names):
+        raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)}, vpm first (the ratios' base)")
+    print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
+          f"pass, {a.threads} threads, transport media; load average {os.getloadavg()[0]:.2f} on "
+          f"{os.cpu_count()} cores", flush=True)
+    for path in a.scenes.split(","):
+        ref, took = vpm_reference(path, a)
+        print(f"\n{os.path.basename(path)}: reference vpm {ref.spp // 2} passes x {a.ref_photons} light paths "
+              f"({'cached' if took == 0 else f'{took:.0f} s'}), relMSE floor {ref.floor:.2e}", flush=True)
+        if a.refs_only:
+            continue
+        sf = SceneFile(path, (("res", a.res),))
+        err = {m: [] for m in names}
+        passes = {m: [] for m in names}
+        for seed in range(a.first_seed, a.first_seed + a.seeds):
+            # the methods' order rotates from seed to seed: a change of the machine's load during the
+            # run (other engineers' jobs) then does not always hit the same method
+            order = names[seed % len(names):] + names[:seed % len(names)]
+            st = equal_time([every[n] for n in order], [sf], seconds=a.equal_time, seeds=[seed], references=ref,
+                            executor="serial", count=4)
+            for m in names:
+                rec = st.select(True, method=m, seed=seed)[0]
+                err[m].append(rec["relmse"])
+                passes[m].append(rec["passes"])
+        base = np.array(err["vpm"])
+        for m in names:
+            e = np.array(err[m])
+            ratio = base / e
+            # less the floor: only where both errors exceed it (else the reference's noise dominates: n/a)
+            ok = (base > ref.floor) & (e > ref.floor)
+            clean = (base[ok] - ref.floor) / (e[ok] - ref.floor)
+            less = (f"mean {clean.mean():.2f}, min {clean.min():.2f}, max {clean.max():.2f} ({ok.sum()} seeds)"
+                    if ok.any() else "n/a (an error under the floor)")
+            print(f"  {m:8s} relMSE {e.mean():.3e} (seeds: {', '.join(f'{x:.3e}' for x in e)}; passes "
+                  f"{', '.join(str(p) for p in passes[m])})  vpm / {m}: mean {ratio.mean():.2f}, min "
+                  f"{ratio.min():.2f}, max {ratio.max():.2f}; less the floor: {less}", flush=True)
+        print(f"  load average {os.getloadavg()[0]:.2f}", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", default=SCENES)
@@ -64,7 +178,17 @@ def main(argv=None) -> int:
     p.add_argument("--photons", type=int, default=100_000)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--equal-time", type=float, default=None, metavar="S")
+    p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1 (split a "
+                                                             "study into locked runs of a few minutes)")
+    p.add_argument("--methods", default="vpm,gvpm+l1,gvpm+l2,bre-3d", help="of --equal-time; vpm first")
+    p.add_argument("--ref-passes", type=int, default=64, help="passes of the vpm reference")
+    p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
+    p.add_argument("--refs-only", action="store_true")
     a = p.parse_args(argv)
+    if a.equal_time is not None:
+        return equal_time_study(a)
     for path in a.scenes.split(","):
         pass_times(path, a)
     return 0

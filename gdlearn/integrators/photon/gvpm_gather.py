@@ -29,6 +29,12 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    proper, not unbiased where they were not.) The offset contribution itself uses the base's
    densities (f(T x) |J| / p(x), |J| = 1).
 
+Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample's photons are
+collected once (row and base term, per-row scratch), then each neighbour runs over them with its
+D_k, S_k and counts in registers, summed in photon order -- the buffers are bit for bit those of
+one write per photon and shift (tests/test_gvpm_fast.py against tests/_gvpm_reference.py) --, and
+a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_light.base_edge``).
+
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
 VPM does); ``count`` the photon shifts: null (b' = b), mixed (reflected by Eq. 16; they are also
@@ -45,7 +51,7 @@ from numba import prange
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.jit import block, inlined, rows
 from gdlearn.kernels.media.medium import medium_params, sample_distance_truncated_1, transmittance
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.kernels.rng import path_state, rand_at
@@ -54,8 +60,8 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
-from gdlearn.integrators.photon.gpm_gather import _finite3, _put
-from gdlearn.integrators.photon.gvpm_light import OK, reconnect
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect_edge, \
+    store_edge
 from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -77,6 +83,15 @@ class GvpmOut(NamedTuple):
     bad: np.ndarray       # (H,): non-finite terms dropped
 
 
+class Scratch(NamedTuple):
+    """A row's scratch arrays, allocated once per row (numba would allocate them per call otherwise)."""
+    buf: np.ndarray       # the hash grid's candidates (as many as it has points)
+    og: np.ndarray        # (4, 12): the four offset gather points of the current distance sample
+    rows: np.ndarray      # one distance sample's admitted photons (light-vertex rows; -1: dropped)
+    cb: np.ndarray        # (n, 3): their base terms c_b
+    edge: np.ndarray      # (n, EDGE_COLS): their recorded edges a -> b, computed once for all neighbours
+
+
 def allocate(h: int, w: int) -> GvpmOut:
     return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, 4, h, w)), np.zeros(h, np.int64))
 
@@ -91,7 +106,8 @@ def gvpm_rows(sa, lp, grids, prm, gv, seed, sample0, radius, out):
 
 @rows
 def _gvpm_rows(sa, lp, ga, gb, prm, gv, seed, sample0, radius, out):
-    for y in prange(radius.shape[0]):
+    for row in prange(radius.shape[0]):
+        y = np.int64(row)           # one specialisation of _row (kernels/jit.py: prange's index type)
         out.bad[y] = _row(sa, lp, (ga, gb), prm, gv, seed, sample0, radius, out, y)
 
 
@@ -105,7 +121,11 @@ def _row(sa, lp, grids, prm, gv, seed, sample0, radius, out, y):
     obeams = np.empty((4, MAX_BEAMS, BEAM_COLS))
     obstate = np.empty((4, MAX_BEAMS, 2), dtype=np.int64)
     o_ok = np.zeros(4, dtype=np.bool_)
-    buf = np.empty(max(1, grids[0].order.shape[0], grids[1].order.shape[0]), dtype=np.int64)
+    nbuf = max(1, grids[0].order.shape[0], grids[1].order.shape[0])
+    # per-row scratch, allocated once (not per sample): the grid's candidates, then one distance
+    # sample's admitted photons (row, base term) and their recorded edges (gvpm_light.base_edge)
+    scr = Scratch(np.empty(nbuf, dtype=np.int64), np.empty((4, 12)), np.empty(nbuf, dtype=np.int64),
+                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)))
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -119,7 +139,7 @@ def _row(sa, lp, grids, prm, gv, seed, sample0, radius, out, y):
             for k in range(4):
                 o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
                                        beams, bstate, nb, obeams[k], obstate[k])
-            nbad += _samples(sa, lp, grids[hh], prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, buf, stack,
+            nbad += _samples(sa, lp, grids[hh], prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, scr, stack,
                              out, hh, y, x)
     return nbad
 
@@ -184,10 +204,10 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
 
 
 @block
-def _samples(sa, lp, grid, prm, gv, h, base, offs, r, buf, stack, out, hh, y, x):
+def _samples(sa, lp, grid, prm, gv, h, base, offs, r, scr, stack, out, hh, y, x):
     """VPM's K distance samples of one camera path, their photons and the photons' shifts."""
     beams, bstate, nb = base
-    og = np.empty((4, 12))
+    og = scr.og
     K = gv.samples
     cnt = 0
     nbad = 0
@@ -209,60 +229,120 @@ def _samples(sa, lp, grid, prm, gv, h, base, offs, r, buf, stack, out, hh, y, x)
         _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og)
         dg = _point(beams, b, t)
         dc = (beams[b, BEAM_D], beams[b, BEAM_D + 1], beams[b, BEAM_D + 2])
-        m, state = int(bstate[b, 1]), bstate[b, 0]
-        for i in range(min(grid_query(grid, dg, r, buf), buf.shape[0])):
-            v = buf[i]
-            if not _admit(lp, v, prm, med, m, state):
-                continue
-            cnt += 1
-            ph = hg_eval(g, dc[0] * lp.d_in[v, 0] + dc[1] * lp.d_in[v, 1] + dc[2] * lp.d_in[v, 2])
-            c_b = (cw[0] * ph * lp.beta[v, 0], cw[1] * ph * lp.beta[v, 1], cw[2] * ph * lp.beta[v, 2])
-            if not _finite3(c_b):
-                nbad += 1
-                continue
-            _put(out.phi, hh, 0, y, x, c_b, 1.0)
-            nbad += _shift_photon(sa, lp, v, dg, g, r, gv.mixed, og, c_b, stack, out, hh, y, x)
+        n, nbad0 = _collect(lp, grid, prm, (med, int(bstate[b, 1]), bstate[b, 0]), g, dg, dc, cw, r, scr, out, hh, y, x)
+        cnt += n
+        nbad += nbad0
+        for j in range(4):
+            nbad += _neighbour(sa, lp, scr, n, dg, g, r, gv.mixed, og, j, stack, out, hh, y, x)
     out.m[hh, y, x] = cnt
     return nbad
 
 
-@block
-def _shift_photon(sa, lp, v, dg, g, r, mixed, og, c_b, stack, out, hh, y, x):
-    """Photon row v (base term c_b) shifted to the four offset gather points og: D_k, S_k, counts."""
+@inlined
+def _finite(a, b, c):
+    return math.isfinite(a) and math.isfinite(b) and math.isfinite(c)
+
+
+@inlined
+def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
+    """The base: every admitted photon in Ball(dg, r), its term c_b = camera factor x rho x beta added
+    to L (in a register, in photon order: the buffer's sum is the same as one write per photon) and
+    kept with its row in the scratch for the four neighbours. Returns (photons, non-finite dropped)."""
+    med, m, state = where
+    n = 0
     nbad = 0
-    bpos = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-    for j in range(4):
+    l0, l1, l2 = out.phi[hh, 0, y, x, 0], out.phi[hh, 0, y, x, 1], out.phi[hh, 0, y, x, 2]
+    for i in range(min(grid_query(grid, dg, r, scr.buf), scr.buf.shape[0])):
+        v = scr.buf[i]
+        if not _admit(lp, v, prm, med, m, state):
+            continue
+        ph = hg_eval(g, dc[0] * lp.d_in[v, 0] + dc[1] * lp.d_in[v, 1] + dc[2] * lp.d_in[v, 2])
+        c0, c1, c2 = cw[0] * ph * lp.beta[v, 0], cw[1] * ph * lp.beta[v, 1], cw[2] * ph * lp.beta[v, 2]
+        if not _finite(c0, c1, c2):
+            nbad += 1                   # counted among the gathered photons (M), never written
+            scr.rows[n] = -1
+            n += 1
+            continue
+        l0 += c0
+        l1 += c1
+        l2 += c2
+        scr.rows[n] = v
+        scr.cb[n, 0] = c0
+        scr.cb[n, 1] = c1
+        scr.cb[n, 2] = c2
+        scr.edge[n, 0] = EDGE_UNKNOWN
+        n += 1
+    out.phi[hh, 0, y, x, 0] = l0
+    out.phi[hh, 0, y, x, 1] = l1
+    out.phi[hh, 0, y, x, 2] = l2
+    return n, nbad
+
+
+@inlined
+def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
+    """The photons of one distance sample (scratch rows 0..n) shifted to neighbour j's gather point
+    og[j]: D_j, S_j and the shift counts summed in registers in photon order, written once. Inlined:
+    a call passing the scene and the light records costs more than a null shift (~0.7 us measured for
+    gvpm_light.reconnect as a call against inlined, on the spot medium)."""
+    d0, d1, d2 = out.phi[hh, 1 + j, y, x, 0], out.phi[hh, 1 + j, y, x, 1], out.phi[hh, 1 + j, y, x, 2]
+    s0, s1, s2 = out.phi[hh, 5 + j, y, x, 0], out.phi[hh, 5 + j, y, x, 1], out.phi[hh, 5 + j, y, x, 2]
+    n_null = 0
+    n_mixed = 0
+    n_rec = 0
+    n_fail = 0
+    nbad = 0
+    cam = og[j, 0] > 0.0
+    dp = (og[j, 1], og[j, 2], og[j, 3])
+    for i in range(n):
+        v = scr.rows[i]
+        if v < 0:
+            continue
+        c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
         c_o = (0.0, 0.0, 0.0)
         ratio = 0.0
+        ok = cam
         kind = NULL
-        ok = og[j, 0] > 0.0
         if ok:
-            dp = (og[j, 1], og[j, 2], og[j, 3])
-            b2, kind = photon_shift(bpos, dg, dp, r, mixed)
+            b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
             f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
             if kind != NULL:
-                status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
+                if scr.edge[i, 0] == EDGE_UNKNOWN:
+                    store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
+                status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
                 ok = status == OK
             if ok:
                 ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
                 c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
                        og[j, 9] * ph * lp.beta[v, 2] * f3[2])
                 ratio = og[j, 10] * rl
-                if not (_finite3(c_o) and math.isfinite(ratio)):
+                if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
                     nbad += 1                                  # counted, never written
                     ok = False
                 elif not ratio > 0.0:
                     ok = False
-            if ok:
-                out.count[hh, C_NULL if kind == NULL else C_RECONNECTED, y, x] += 1
-                if kind == REFLECTED:
-                    out.count[hh, C_MIXED, y, x] += 1
         if not ok:
-            out.count[hh, C_FAILED, y, x] += 1
-            _put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            n_fail += 1
+            d0 += -1.0 * c_b[0]                                # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            d1 += -1.0 * c_b[1]
+            d2 += -1.0 * c_b[2]
             continue
-        # Eq. 19, balance heuristic (a null shift's: the camera side's, og[j, 11])
-        wgt = og[j, 11] if kind == NULL else mis_weight_from_log_ratio(math.log(ratio))
-        _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
-        _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
+        if kind == NULL:
+            n_null += 1
+            wgt = og[j, 11]                                    # a null shift's: the camera side's
+        else:
+            n_rec += 1
+            n_mixed += kind == REFLECTED
+            wgt = mis_weight_from_log_ratio(math.log(ratio))   # Eq. 19, balance heuristic
+        d0 += wgt * (c_o[0] - c_b[0])
+        d1 += wgt * (c_o[1] - c_b[1])
+        d2 += wgt * (c_o[2] - c_b[2])
+        s0 += wgt * c_o[0]
+        s1 += wgt * c_o[1]
+        s2 += wgt * c_o[2]
+    out.phi[hh, 1 + j, y, x, 0], out.phi[hh, 1 + j, y, x, 1], out.phi[hh, 1 + j, y, x, 2] = d0, d1, d2
+    out.phi[hh, 5 + j, y, x, 0], out.phi[hh, 5 + j, y, x, 1], out.phi[hh, 5 + j, y, x, 2] = s0, s1, s2
+    out.count[hh, C_NULL, y, x] += n_null
+    out.count[hh, C_MIXED, y, x] += n_mixed
+    out.count[hh, C_RECONNECTED, y, x] += n_rec
+    out.count[hh, C_FAILED, y, x] += n_fail
     return nbad

@@ -43,7 +43,7 @@ import math
 from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_null
 from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
-from gdlearn.kernels.jit import block
+from gdlearn.kernels.jit import block, inlined
 from gdlearn.kernels.media.boundary import next_medium
 from gdlearn.kernels.media.medium import distance_pdf, medium_params, pass_probability
 from gdlearn.kernels.media.phase import hg_eval
@@ -54,7 +54,7 @@ from gdlearn.integrators.photon.gpm_light import _dir, parent_factor
 OK, FAIL, FAIL_SPECULAR = 0, 1, 2
 
 
-@block
+@inlined
 def _parent_ratio(sa, lp, q, v, w_new):
     """(status, f_a(w') / f_a(w) per channel, p_w(w') / p_w(w)) of parent row q towards w_new."""
     one = (1.0, 1.0, 1.0)
@@ -80,7 +80,7 @@ def _parent_ratio(sa, lp, q, v, w_new):
 MAX_CROSSINGS = 16
 
 
-@block
+@inlined
 def _ancestor(sa, lp, v):
     """(a, child, crossings): the photon's parent a = y_{s-1} -- its nearest ancestor that is not a null
     interface (those only change the medium: the edge a -> b is one straight line through them) --,
@@ -92,10 +92,10 @@ def _ancestor(sa, lp, v):
         child = q
         q = lp.parent[q]
         n += 1
-    return q, child, n
+    return int(q), child, n         # int64 (lp.parent is int32): one _spawn specialisation for every caller
 
 
-@block
+@inlined
 def edge_walk(sa, a, o, w, target, medium, stack):
     """Walk the straight edge from the vertex ``a`` (rays spawned at ``o``, a pushed off a surface) towards ``target``: through null interfaces
     (the medium changes at each, Mitsuba's rule), failing at any other surface -- visibility over
@@ -138,39 +138,87 @@ def edge_walk(sa, a, o, w, target, medium, stack):
     return False, n, tau, 0.0, medium
 
 
+#: a photon's recorded edge a -> b (:func:`base_edge`) as a scratch row: status, parent row, child row,
+#: null crossings, optical depth (3), log density; status EDGE_UNKNOWN: not computed yet
+EDGE_COLS = 8
+EDGE_UNKNOWN = -1.0
+#: base_edge() statuses besides OK: the edge has no parent or no length (the shift fails at once), or
+#: its walk or density failed (the shift fails after the parent and the offset edge were checked,
+#: the order in which reconnect() has always reported its outcomes)
+EDGE_NONE, EDGE_LATE = 1, 3
+
+
+@inlined
+def base_edge(sa, lp, v, stack):
+    """What every neighbour's reconnection of photon row v shares: the recorded edge a -> b. Returns
+    (status, parent row a, the row after a on the edge, null crossings, optical depth per channel, log
+    of the tracer's density of b) -- the edge walked through its null interfaces, or analytic when it
+    crosses none (a recorded edge in one medium needs no ray)."""
+    zero = (0.0, 0.0, 0.0)
+    q, child, n_null = _ancestor(sa, lp, v)
+    if q < 0:
+        return EDGE_NONE, q, child, n_null, zero, 0.0
+    a = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    w_old, l_old = _dir(a, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
+    if not l_old > 0.0:
+        return EDGE_NONE, q, child, n_null, zero, 0.0
+    if n_null == 0:
+        sig = medium_params(sa.media[lp.medium[v]])[0]
+        pc = distance_pdf(sig, l_old)
+        if not pc > 0.0:
+            return EDGE_LATE, q, child, n_null, zero, 0.0
+        return OK, q, child, n_null, (sig[0] * l_old, sig[1] * l_old, sig[2] * l_old), math.log(pc)
+    ok, n_b, tau_b, logp_b, med_b = edge_walk(sa, a, _spawn(lp, q, a, w_old), w_old, (lp.pos[v, 0], lp.pos[v, 1],
+                                              lp.pos[v, 2]), lp.medium[child], stack)
+    if not (ok and n_b == n_null and med_b == lp.medium[v]):
+        return EDGE_LATE, q, child, n_null, zero, 0.0
+    return OK, q, child, n_null, tau_b, logp_b
+
+
+@inlined
+def store_edge(edge, i, e):
+    edge[i, 0] = e[0]
+    edge[i, 1] = e[1]
+    edge[i, 2] = e[2]
+    edge[i, 3] = e[3]
+    for c in range(3):
+        edge[i, 4 + c] = e[4][c]
+    edge[i, 7] = e[5]
+
+
+@inlined
+def load_edge(edge, i):
+    return (int(edge[i, 0]), int(edge[i, 1]), int(edge[i, 2]), int(edge[i, 3]), (edge[i, 4], edge[i, 5], edge[i, 6]),
+            edge[i, 7])
+
+
 @block
 def reconnect(sa, lp, v, b_off, stack):
     """Reconnect photon row v's parent to the offset photon ``b_off`` (module docstring). Returns
     (status, beta_b' / beta_b per channel, light-side density ratio p(b' | a) / p(b | a), the
     direction a -> b' the offset photon arrives along)."""
+    return reconnect_edge(sa, lp, v, b_off, stack, base_edge(sa, lp, v, stack))
+
+
+@inlined
+def reconnect_edge(sa, lp, v, b_off, stack, edge):
+    """:func:`reconnect` with the recorded edge a -> b given (:func:`base_edge`): a camera sample's
+    neighbours shift the same photon and walk that edge once."""
     zero = (0.0, 0.0, 0.0)
-    q, child, n_null = _ancestor(sa, lp, v)
-    if q < 0:
+    st, q, child, n_null, tau_b, logp_b = edge
+    if st == EDGE_NONE:
         return FAIL, zero, 0.0, zero
     a = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     w_new, l_new = _dir(a, b_off)
-    w_old, l_old = _dir(a, b)
-    if not (l_new > 0.0 and l_old > 0.0):
+    w_old, l_old = _dir(a, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
+    if not l_new > 0.0:
         return FAIL, zero, 0.0, zero
     status, fr, pr = _parent_ratio(sa, lp, q, v, w_new)
     if status != OK:
         return status, zero, 0.0, zero
-    start = lp.medium[child]
-    ok, n_o, tau_o, logp_o, med_o = edge_walk(sa, a, _spawn(lp, q, a, w_new), w_new, b_off, start, stack)
-    if not (ok and n_o == n_null and med_o == lp.medium[v]):
+    ok, n_o, tau_o, logp_o, med_o = edge_walk(sa, a, _spawn(lp, q, a, w_new), w_new, b_off, lp.medium[child], stack)
+    if not (ok and n_o == n_null and med_o == lp.medium[v]) or st != OK:
         return FAIL, zero, 0.0, zero
-    if n_null == 0:
-        # a recorded edge crosses no surface: its optical depth and density need no ray
-        sig = medium_params(sa.media[lp.medium[v]])[0]
-        pc = distance_pdf(sig, l_old)
-        if not pc > 0.0:
-            return FAIL, zero, 0.0, zero
-        tau_b, logp_b = (sig[0] * l_old, sig[1] * l_old, sig[2] * l_old), math.log(pc)
-    else:
-        ok, n_b, tau_b, logp_b, med_b = edge_walk(sa, a, _spawn(lp, q, a, w_old), w_old, b, start, stack)
-        if not (ok and n_b == n_null and med_b == lp.medium[v]):
-            return FAIL, zero, 0.0, zero
     geo = (l_old * l_old) / (l_new * l_new)
     # T(a, b') / T(a, b) = exp(-(tau' - tau)) per channel: one exponential, no 0 / 0 in a dense medium
     f3 = (fr[0] * math.exp(tau_b[0] - tau_o[0]) * geo, fr[1] * math.exp(tau_b[1] - tau_o[1]) * geo,
@@ -178,7 +226,7 @@ def reconnect(sa, lp, v, b_off, stack):
     return OK, f3, pr * math.exp(logp_o - logp_b) * geo, w_new
 
 
-@block
+@inlined
 def _spawn(lp, q, a, w):
     """Where a ray from vertex row q leaves along w: a medium vertex in place, a surface or an emitter
     pushed off its geometric normal (a point light's zero normal leaves it in place)."""
