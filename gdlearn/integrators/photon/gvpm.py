@@ -33,8 +33,10 @@ halve M). Surface shift counts: ``shift_surface_reconnected``, ``shift_surface_m
 
 ``shift="mixed"`` (default; Eq. 16) or ``"simple"`` (every photon translated by d' - d and
 reconnected). Reconnections cross null interfaces (a medium's boundary) as the base edge did
-(:mod:`gdlearn.integrators.photon.gvpm_light`). Photons whose parent is specular fail their shift
-(counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet.
+(:mod:`gdlearn.integrators.photon.gvpm_light`). Volume photons whose parent is specular fail their
+shift (counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet; surface photons
+take GPM's manifold walk when their specular chain lies in vacuum, and fail otherwise
+(:mod:`gdlearn.integrators.photon.gvol_surface_light`).
 """
 from __future__ import annotations
 
