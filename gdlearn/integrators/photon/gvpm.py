@@ -11,19 +11,32 @@ points), ``gx``, ``gy`` for the reconstructions (``--recon l1|l2|cv|cv-weighted`
 shift counts ``shift_null``, ``shift_mixed``, ``shift_reconnected``, ``shift_failed`` (summed over
 passes; mixed ones are reconnected too).
 
-Only light transport ending in the medium (``transport="media"``, the setting of the paper's
-experiments, PHOTONS.md E15); the full image needs GPM's surface shifts beside it and is refused.
+``transport="all"`` (default): VPM's full image -- the emission the camera paths see, the surface
+photon estimate at the first non-specular vertex (through the media before it) and the medium
+estimate along the camera beams -- with the surface part's gradients by GPM's shifts
+(:mod:`gdlearn.integrators.photon.gvol_surface`: the same replayed offset camera path as the
+medium part, the transmittance along the offset's own beams in its f, photon edges through media
+and null interfaces with a medium parent's phase function in the reconnection). Both passes write
+the same L / D_k / S_k layout with one MIS convention and are summed before the frame's images.
+``transport="media"``: the medium part alone, the setting of the paper's experiments (PHOTONS.md E15).
 
-Progressive statistics as VPM's (PHOTONS.md Sec. 1.4): per pixel R, N with the cube root, every
-flux of a pixel (the base, the four D_k and S_k) sharing R and N, N driven by the base's photon count
-M (all K distance samples of the pass). ``volume_radius=r, alpha=1`` keeps one fixed radius for
-every pixel: each pass is then an independent estimate of the blurred image and the gradients are
-unbiased for its differences (tests/test_gvpm.py). No photon subsets (E16: they would halve M).
+Progressive statistics as VPM's (PHOTONS.md Sec. 1.4), each part its own: the medium part per pixel
+R, N with the cube root, every flux of a pixel (the base, the four D_k and S_k) sharing R and N, N
+driven by the base's photon count M (all K distance samples of the pass); the surface part GPM's
+(Hua et al. 2017, Sec. 4.3: R^2, N per pixel, shared by the base and shifted fluxes, driven by the
+base's M). One alpha for both, as VPM. ``volume_radius=r, radius=r_s, alpha=1`` keeps fixed radii:
+each pass is then an independent estimate of the blurred image and the gradients are unbiased for
+its differences (tests/test_gvpm.py, tests/test_gvpm_full.py). No photon subsets (E16: they would
+halve M). Surface shift counts: ``shift_surface_reconnected``, ``shift_surface_manifold``,
+``shift_surface_failed``; the emission and its gradients are ``emission``, ``emission_gx``,
+``emission_gy`` (as GPM: the reconstructions leave it out and add it back).
 
 ``shift="mixed"`` (default; Eq. 16) or ``"simple"`` (every photon translated by d' - d and
 reconnected). Reconnections cross null interfaces (a medium's boundary) as the base edge did
-(:mod:`gdlearn.integrators.photon.gvpm_light`). Photons whose parent is specular fail their shift
-(counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet.
+(:mod:`gdlearn.integrators.photon.gvpm_light`). Volume photons whose parent is specular fail their
+shift (counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet; surface photons
+take GPM's manifold walk when their specular chain lies in vacuum, and fail otherwise
+(:mod:`gdlearn.integrators.photon.gvol_surface_light`).
 """
 from __future__ import annotations
 
@@ -33,26 +46,28 @@ import numpy as np
 
 from gdlearn.integrators.base import PassResult
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
+from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon import gvpm_gather as gg
-from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
+from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED
+from gdlearn.integrators.photon.gvol_surface import surface_pass
+from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, accumulate_density, reduce_radius
 from gdlearn.integrators.photon.volumetric import VPM, reduce_radius3
 from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
+#: the medium part's shift counts (gvpm_gather.C_*) and the surface part's (gpm_gather's outcomes)
+_MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed")
+_SURFACE_COUNTS = (("reconnected", RECONNECTED), ("manifold", MANIFOLD), ("failed", FAILED))
 
 
 class GVPM(VPM):
-    """``make("gvpm", scene, transport="media", shift="mixed", seed=0, photons_per_pass=100000,
-    alpha=0.7, volume_radius=None, volume_radius_scale=1.0, neighbors=32, samples=8, effects=None,
-    max_depth=None, threads=None)`` (module docstring)."""
+    """``make("gvpm", scene, transport="all", shift="mixed", seed=0, photons_per_pass=100000,
+    alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None, volume_radius_scale=1.0,
+    neighbors=32, samples=8, effects=None, max_depth=None, threads=None)`` (module docstring)."""
 
     name = "gvpm"
 
     def __init__(self, scene, *, shift: str = "mixed", transport: str = "all", radii: str = "fixed", **options):
-        if transport != "media":
-            raise ValueError(f"gvpm: transport={transport!r} is not supported yet -- it renders light transport "
-                             "ending in the medium only (the paper's setting); fix: --transport media "
-                             "(transport=\"media\"), and compare against vpm/bre with --transport media")
         if shift not in SHIFTS:
             raise ValueError(f"gvpm: shift={shift!r}; choose mixed (Gruson et al. 2018, Eq. 16) or simple")
         if radii != "fixed":
@@ -61,12 +76,16 @@ class GVPM(VPM):
         super().__init__(scene, transport=transport, radii="fixed", **options)
         self.shift = shift
         self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed")
+        self.mtab = manifold_table(scene, self.setup.sa) if self.vparams.surfaces else None
 
     def _gvpm(self, lp, vgrids, sample0, radius):
         out = gg.allocate(self.height, self.width)
         with self.setup.parallel(self.height):
             gg.gvpm_rows(self.setup.sa, lp, vgrids, self.gather_params, self.gv, self.seed, sample0, radius, out)
         return out
+
+    def _surface(self, lp, sgrids, sample0, radius):
+        return surface_pass(self.setup, lp, sgrids, self.mtab, self.gather_params, self.seed, sample0, radius)
 
     def compile(self) -> float:
         import time
@@ -78,42 +97,82 @@ class GVPM(VPM):
         self.height, self.width = 2, 2
         try:
             self._gvpm(lp, (g, g), FOOTPRINT_SAMPLE, np.full((2, 2), 0.1))
+            if self.vparams.surfaces:
+                self._surface(lp, (g, g), FOOTPRINT_SAMPLE, np.full((2, 2), 0.1))
         finally:
             self.height, self.width = h, w
         return time.perf_counter() - t0
 
-    def gather(self, accel, pass_index: int) -> PassResult:
-        lp, _, vgrids, _ = accel
+    def _start(self):
         h, w = self.height, self.width
+        self.Nv = np.zeros((h, w))
+        self.rv = np.full((h, w), self.rv0)
+        self.Dv = np.zeros((2, 9, h, w, 3))
+        self.counts = np.zeros((4, h, w))
+        # the surface part (zeros under transport="media": the sums below need no branch)
+        self.N = np.zeros((h, w))
+        self.D = np.zeros((2, 9, h, w, 3))
+        self.E = np.zeros((2, 9, h, w, 3))
+        self.scounts = np.zeros((3, h, w))
+
+    def _surface_step(self, lp, sgrids, pass_index):
+        """The surface pass into D (SPPM's density form at this pass's R^2), E and the counts."""
+        h, w = self.height, self.width
+        out = self._surface(lp, sgrids, 2 * pass_index, np.sqrt(self.r2))
+        accumulate_density(self.D, out.phi, np.broadcast_to(self.r2, (2, 9, h, w)))
+        self.E += out.le
+        self.scounts += out.count.sum(axis=0)
+        self._m = out.m.sum(axis=0)
+        return out
+
+    def gather(self, accel, pass_index: int) -> PassResult:
+        lp, sgrids, vgrids, _ = accel
         if pass_index == 0:
-            self.Nv = np.zeros((h, w))
-            self.rv = np.full((h, w), self.rv0)
-            self.Dv = np.zeros((2, 9, h, w, 3))
-            self.counts = np.zeros((4, h, w))
+            self._start()
         out = self._gvpm(lp, vgrids, 2 * pass_index, self.rv)
         vol = 4.0 / 3.0 * math.pi * self.rv ** 3
         self.Dv += out.phi / vol[None, None, :, :, None]
         self.counts += out.count.sum(axis=0)
         self._mv = out.m.sum(axis=0)
-        est = self.Dv / (self.n_half * (pass_index + 1))
-        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy")}
-        for b in est:                                     # per half: (9, H, W, 3)
-            gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # the MIS weights are inside the buffers
-            for name, img in zip(("primal", "primal_base", "gx", "gy"), (mis_primal(b), b[0], gx, gy)):
-                halves[name].append(img)
+        sout = self._surface_step(lp, sgrids, pass_index) if self.vparams.surfaces else None
+        k = pass_index + 1
+        # as VPM's frame: (surface + medium densities) / light paths + emission, per half
+        est = (self.D + self.Dv) / (self.n_half * k) + self.E / k
+        names = ("primal", "primal_base", "gx", "gy", "emission", "emission_gx", "emission_gy")
+        halves = {name: [] for name in names}
+        for b, e in zip(est, self.E / k):                # per half: (9, H, W, 3)
+            for part, buf in ((("primal", "gx", "gy"), b), (("emission", "emission_gx", "emission_gy"), e)):
+                gx, gy = combine_gradients(buf[1:5], (1.0, 1.0))   # the MIS weights are inside the buffers
+                for name, img in zip(part, (mis_primal(buf), gx, gy)):
+                    halves[name].append(img)
+            halves["primal_base"].append(b[0])
+        if not self.vparams.surfaces:
+            halves = {n: v for n, v in halves.items() if not n.startswith("emission")}
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
-        for i, name in enumerate(("null", "mixed", "reconnected", "failed")):
+        for i, name in enumerate(_MEDIUM_COUNTS):
             images[f"shift_{name}"] = self.counts[i].copy()
         stats = {"light_paths": 2 * self.n_half, "light_vertices": len(lp), "volume_photons": int(self._nvol),
                  "volume_photons_gathered": int(out.m.sum()), "nonfinite_samples": int(out.bad.sum())}
-        for i, name in enumerate(("null", "mixed", "reconnected", "failed")):
+        for i, name in enumerate(_MEDIUM_COUNTS):
             stats[f"photon_shifts_{name}"] = int(out.count[:, i].sum())
+        if sout is not None:
+            for name, i in _SURFACE_COUNTS:
+                images[f"shift_surface_{name}"] = self.scounts[i].copy()
+                stats[f"surface_photon_shifts_{name}"] = int(sout.count[:, i].sum())
+            stats["photons_gathered"] = int(sout.m.sum())
+            stats["nonfinite_samples"] += int(sout.bad.sum())
         return PassResult(images=images, spp=2, halves={n: tuple(v) for n, v in halves.items()}, stats=stats)
 
     def update_radius(self, pass_index: int) -> None:
         self.Nv, rv = reduce_radius3(self.Nv, self.rv, self._mv, self.alpha)
         self.rv = np.maximum(rv, self.r_min)
+        if self.vparams.surfaces:
+            self.N, self.r2 = reduce_radius(self.N, self.r2, self._m, self.alpha)
 
     def pass_state(self) -> dict:
-        return {"alpha": self.alpha, "mean_volume_radius": float(self.rv.mean()), "volume_radius": self.rv.copy(),
-                "photon_count": self.Nv.copy()}
+        state = {"alpha": self.alpha, "mean_volume_radius": float(self.rv.mean()), "volume_radius": self.rv.copy(),
+                 "photon_count": self.Nv.copy()}
+        if self.vparams.surfaces:
+            state.update(mean_radius=float(np.sqrt(self.r2).mean()), radius=np.sqrt(self.r2),
+                         surface_photon_count=self.N.copy())
+        return state
