@@ -144,9 +144,9 @@ def ray_frame_copy(b, d, w, d_off, w_off):
     photon b, seen from its gather point d (its projection on the base camera ray of direction w), is
     copied rigidly into the offset ray's frame, ``b' = d' + R (b - d)`` with R of
     :func:`ray_frame_rotation` and d' = c' + t w' the distance copy of d. R w = w' and R preserves
-    lengths, so d' b' is perpendicular to the offset ray, |d' b'| = |d b| (the 2D kernel has the same
-    value at both), and b' projects onto the offset ray at the same t. A rotation and a translation:
-    |db'/db| = 1 (:data:`PHOTON_JACOBIAN`). Returns ``(ok, b')``."""
+    lengths, so d' b' is perpendicular to the offset ray, ``|d' b'| = |d b|`` (the 2D kernel has the
+    same value at both), and b' projects onto the offset ray at the same t. A rotation and a
+    translation: ``|db'/db| = 1`` (:data:`PHOTON_JACOBIAN`). Returns ``(ok, b')``."""
     ok, rot = ray_frame_rotation(w, w_off)
     e = _sub(b, d)
     out = (d_off[0] + rot[0][0] * e[0] + rot[0][1] * e[1] + rot[0][2] * e[2],

@@ -16,13 +16,13 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
 4. **Photon shift** and light subpath, per kernel:
 
    - *3D* (:func:`shift_3d`, the paper's): d = c + t w_c with t uniform on b's chord; G-VPM's mixed
-     (Eq. 16) or simple shift relative to (d, d'). Null criterion (Sec. 5.6): |d' - b| < r and
-     t <= s'. The offset contribution keeps the base's chord density (f(T x) |J| / p(x)); the MIS
+     (Eq. 16) or simple shift relative to (d, d'). Null criterion (Sec. 5.6): ``|d' - b| < r`` and
+     t <= s'. The offset contribution keeps the base's chord density (``f(T x) |J| / p(x)``); the MIS
      ratio takes the offset's own chord density 1 / (2 D t'), D t' = sqrt(r^2 - d'_perp^2) of b'
      against the offset ray (PHOTONS.md Sec. 5.6 [analysis]): ``[D t / D t'] x`` the light side's.
      A chord D t' of 0 (b' on the offset kernel's boundary, a null set) fails the shift.
    - *2D* (:func:`shift_2d`): d is the photon's projection on the beam; the offset photon is the
-     rigid ray-frame copy (:func:`gdlearn.shifts.volume_photon.ray_frame_copy`, |J| = 1), so the
+     rigid ray-frame copy (:func:`gdlearn.shifts.volume_photon.ray_frame_copy`, ``|J| = 1``), so the
      kernel value is the same at d'; every photon is reconnected. No mixed shift: two discs facing
      different rays overlap in a null set. The MIS ratio is the light side's alone (t is no
      random variable of a 2D query).
