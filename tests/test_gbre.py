@@ -75,8 +75,12 @@ def fog_runs(request, fog):
 def test_unbiased_at_fixed_radius(fog_runs, i, name):
     """gx - (I[x+1] - I[x]) of the base (and gy, and the MIS primal - the base) has mean zero per
     pixel, photon subsets on (the default): tests/test_gvpm.py's z statistics (thresholds 1.45 and
-    5.5 on 512 replicates: a bias shows as growing z, noise does not). The planted bugs that fail
-    it are listed in the commit message that added this test."""
+    5.5 on 512 replicates: a bias shows as growing z, noise does not). Planted bugs (2026-12-04):
+    the offset divided by its own chord density 1 / (2 dt') instead of the base's fails 3D gx (mean
+    z^2 4.0, max |z| 8.9); the reconnection's visibility test skipped (gvpm_light.edge_walk going
+    through any surface) fails 3D gx / gy (6.2 / 5.5) and 2D gx / gy (3.7 / 3.7). The frame copy
+    rotated the wrong way (R^T) passes here -- a one-pixel rotation moves the photon by a small
+    fraction of the disc -- and is caught by tests/test_shifts_volume_photon.py (7 of 8 pairs)."""
     kernel, (d, _) = fog_runs
     _check_z(d[:, i], f"{kernel} {name}")
 
@@ -150,7 +154,9 @@ def test_mis_weights_of_a_pair_sum_to_one(kernel):
     volume photon b gathered on a base camera beam at t (3D: t on b's chord; 2D: b's projection),
     shifted to an offset beam (another origin and direction) and reconnected; the reverse shift of
     the offset path (offset beam -> base beam, the photon at b') returns b and gives the reciprocal
-    density ratio -- light side and chord densities (3D) -- so w(x) + w(T x) = 1 to 1e-9."""
+    density ratio -- light side and chord densities (3D) -- so w(x) + w(T x) = 1 to 1e-9. The offset
+    chord taken for the base photon b instead of b' (planted) fails it. A chord density dropped from
+    both sides, or inverted on both, would not: any pair of weights w, 1 - w is unbiased."""
     from gdlearn.integrators.photon import gbre_gather as gb
     from gdlearn.kernels.accel.bvh import STACK_SIZE
     from gdlearn.photons.records import K_MEDIUM
