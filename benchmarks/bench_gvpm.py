@@ -45,35 +45,46 @@ SCENES = "scenes/fog-box.xml,scenes/spot-medium.xml"
 KINDS = ("null", "mixed", "reconnected", "failed")
 
 
-def pass_times(path, a) -> None:
-    scene = load(path, res=a.res)
-    common = dict(seed=0, photons_per_pass=a.photons, threads=a.threads, transport="media")
-    integs = {"vpm": make("vpm", scene, **common), "gvpm": make("gvpm", scene, **common),
-              "gvpm-simple": make("gvpm", scene, shift="simple", **common)}
+def interleaved_times(integs: dict, repeats: int):
+    """Compile every integrator, then run their passes interleaved (a, b, c, a, ...: all see the same
+    load); returns (the median seconds of a pass after the first, per name; each one's last PassResult)."""
     for integ in integs.values():
         integ.compile()
     times = {n: [] for n in integs}
     last = {}
-    for i in range(a.repeats + 1):
+    for i in range(repeats + 1):
         for n, integ in integs.items():
             t0 = time.perf_counter()
             res = integ.render_pass(i)
             if i > 0:
                 times[n].append(time.perf_counter() - t0)
             last[n] = res
-    med = {n: statistics.median(v) for n, v in times.items()}
+    return {n: statistics.median(v) for n, v in times.items()}, last
+
+
+def shift_line(name: str, res) -> str:
+    """The stage split and photon-shift statistics of a gradient pass (per gathered photon and neighbour)."""
+    st = res.stats
+    c = {k: st[f"photon_shifts_{k}"] for k in KINDS}
+    tot = max(c["null"] + c["reconnected"] + c["failed"], 1)
+    stage = {k: res.timings.get(k, 0.0) for k in ("photons", "build", "gather")}
+    return (f"    {name:12s} stages: light paths {stage['photons']:.3f} s, build {stage['build']:.3f} s, gather "
+            f"{stage['gather']:.3f} s; photon shifts: null {c['null'] / tot:.1%}, reconnected "
+            f"{c['reconnected'] / tot:.1%} (of which reflected by Eq. 16 {c['mixed'] / tot:.1%}), failed "
+            f"{c['failed'] / tot:.1%}; gathered photons {st['volume_photons_gathered']}")
+
+
+def pass_times(path, a) -> None:
+    scene = load(path, res=a.res)
+    common = dict(seed=0, photons_per_pass=a.photons, threads=a.threads, transport="media")
+    integs = {"vpm": make("vpm", scene, **common), "gvpm": make("gvpm", scene, **common),
+              "gvpm-simple": make("gvpm", scene, shift="simple", **common)}
+    med, last = interleaved_times(integs, a.repeats)
     line = f"{os.path.basename(path):18s} " + "  ".join(f"{n} {t:6.3f} s/pass" for n, t in med.items())
     line += f"  gvpm/vpm {med['gvpm'] / med['vpm']:5.2f}  simple/vpm {med['gvpm-simple'] / med['vpm']:5.2f}"
     print(line, flush=True)
     for n in ("gvpm", "gvpm-simple"):
-        st = last[n].stats
-        c = {k: st[f"photon_shifts_{k}"] for k in KINDS}
-        tot = max(c["null"] + c["reconnected"] + c["failed"], 1)
-        stage = {k: last[n].timings.get(k, 0.0) for k in ("photons", "build", "gather")}
-        print(f"    {n:12s} stages: light paths {stage['photons']:.3f} s, build {stage['build']:.3f} s, gather "
-              f"{stage['gather']:.3f} s; photon shifts: null {c['null'] / tot:.1%}, reconnected "
-              f"{c['reconnected'] / tot:.1%} (of which reflected by Eq. 16 {c['mixed'] / tot:.1%}), failed "
-              f"{c['failed'] / tot:.1%}; gathered photons {st['volume_photons_gathered']}", flush=True)
+        print(shift_line(n, last[n]), flush=True)
 
 
 #: the sources a vpm reference depends on (its cache key): VPM's camera pass, volume estimates, photons

@@ -4,8 +4,9 @@ Stops after ``--spp`` samples per pixel or ``--time`` seconds of rendering (JIT 
 counted), whichever comes first. ``--out`` picks the format from its extension (.exr, .png tone-mapped,
 .npy linear float); ``--buffers DIR`` also writes every buffer of the final frame (primal, gradients,
 half-buffers, variances) as .npy. Ctrl-C stops early and still writes what was accumulated.
-For gradient integrators (``--integrator gpt-replay``, ``gpt``, ``gpm``, ``gvpm``), ``--recon {cv,cv-weighted,l2,l1}`` writes the
-reconstructed image to ``--out`` instead of the primal (and ``recon.npy`` beside the buffers).
+For gradient integrators (``--integrator gpt-replay``, ``gpt``, ``gpm``, ``gvpm``, ``gbre``),
+``--recon {cv,cv-weighted,l2,l1}`` writes the reconstructed image to ``--out`` instead of the primal
+(and ``recon.npy`` beside the buffers).
 Scene defaults are overridden with ``--set name=value`` (like ``mitsuba.load_file(path, res=64)``).
 """
 from __future__ import annotations
@@ -18,18 +19,19 @@ import time
 #: (tests/test_gpt.py checks that the two agree)
 SHIFT_CHOICES = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
                  "halfvector+replay+reconnection")
-#: ``--shift`` choices of gvpm (the photon shift, Gruson et al. 2018, Eq. 16)
+#: ``--shift`` choices of gvpm and gbre (the photon shift, Gruson et al. 2018, Eq. 16)
 VOLUME_SHIFT_CHOICES = ("mixed", "simple")
 
 #: integrators that take --photons, --alpha and --radius
-PHOTON_INTEGRATORS = ("sppm", "ppm", "gpm", "vpm", "bre", "gvpm")
+PHOTON_INTEGRATORS = ("sppm", "ppm", "gpm", "vpm", "bre", "gvpm", "gbre")
 #: option -> (keyword, the integrators it applies to)
 PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alpha": ("alpha", PHOTON_INTEGRATORS),
                   "--radius": ("radius", PHOTON_INTEGRATORS), "--direct": ("direct", ("sppm", "ppm")),
-                  "--volume-radius": ("volume_radius", ("vpm", "bre", "gvpm")),
-                  "--neighbors": ("neighbors", ("vpm", "bre", "gvpm")),
-                  "--transport": ("transport", ("vpm", "bre", "gvpm")), "--samples": ("samples", ("vpm", "gvpm")),
-                  "--kernel": ("kernel", ("bre",)), "--radii": ("radii", ("vpm", "bre"))}
+                  "--volume-radius": ("volume_radius", ("vpm", "bre", "gvpm", "gbre")),
+                  "--neighbors": ("neighbors", ("vpm", "bre", "gvpm", "gbre")),
+                  "--transport": ("transport", ("vpm", "bre", "gvpm", "gbre")),
+                  "--samples": ("samples", ("vpm", "gvpm")),
+                  "--kernel": ("kernel", ("bre", "gbre")), "--radii": ("radii", ("vpm", "bre"))}
 
 
 def add_parser(subparsers) -> None:
@@ -53,30 +55,31 @@ def add_parser(subparsers) -> None:
     p.add_argument("--shift", default=None, choices=SHIFT_CHOICES + VOLUME_SHIFT_CHOICES, metavar="POLICY",
                    help="gpt: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
                         "manifold exploration where the effects plan renders caustics through specular chains the "
-                        "walk can move, else halfvector+replay+reconnection); gvpm: the photon shift, mixed "
-                        "(default, Gruson et al. 2018 Eq. 16) or simple")
+                        "walk can move, else halfvector+replay+reconnection); gvpm/gbre: the photon shift, mixed "
+                        "(default, Gruson et al. 2018 Eq. 16; gbre --kernel 3d) or simple (gbre --kernel 2d: the "
+                        "ray-frame copy, its default)")
     # photon estimators (sppm, ppm, vpm, bre); a pass takes 2 camera samples per pixel, so --spp counts passes too
     p.add_argument("--photons", type=int, default=None, metavar="N",
-                   help="sppm/ppm/vpm/bre/gvpm: light paths emitted per pass (default 100000)")
+                   help="sppm/ppm/vpm/bre/gvpm/gbre: light paths emitted per pass (default 100000)")
     p.add_argument("--alpha", type=float, default=None,
-                   help="sppm/ppm/vpm/bre/gvpm: radius reduction alpha (default 0.7)")
+                   help="sppm/ppm/vpm/bre/gvpm/gbre: radius reduction alpha (default 0.7)")
     p.add_argument("--radius", type=float, default=None, metavar="R",
                    help="sppm/ppm/vpm/bre/gvpm: initial surface radius in scene units (default: the pixel footprint)")
     p.add_argument("--direct", choices=("photons", "nee"), default=None,
                    help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
     p.add_argument("--volume-radius", type=float, default=None, metavar="R",
-                   help="vpm/bre/gvpm: initial volume kernel radius in scene units (default: the median distance to "
-                        "the --neighbors-th nearest volume photon)")
+                   help="vpm/bre/gvpm/gbre: initial volume kernel radius in scene units (default: the median "
+                        "distance to the --neighbors-th nearest volume photon)")
     p.add_argument("--neighbors", type=int, default=None, metavar="N",
-                   help="vpm/bre/gvpm: photons per kernel that set the default volume radius, and the k of "
+                   help="vpm/bre/gvpm/gbre: photons per kernel that set the default volume radius, and the k of "
                         "k-NN and variable radii (default 32)")
     p.add_argument("--transport", choices=("all", "media"), default=None,
-                   help="vpm/bre/gvpm: the full image (default; gvpm: surface gradients by GPM's shifts) or only "
-                        "light transport ending in the medium")
+                   help="vpm/bre/gvpm/gbre: the full image (default; gvpm: surface gradients by GPM's shifts) or "
+                        "only light transport ending in the medium (gbre: media only for now)")
     p.add_argument("--samples", type=int, default=None, metavar="K",
                    help="vpm/gvpm: distance samples per camera path (default 8)")
     p.add_argument("--kernel", choices=("2d", "3d"), default=None,
-                   help="bre: a biweight disc facing the ray (2d) or a uniform ball (3d, the default)")
+                   help="bre/gbre: a biweight disc facing the ray (2d) or a uniform ball (3d, the default)")
     p.add_argument("--radii", choices=("fixed", "knn", "variable"), default=None,
                    help="bre: photon radii fixed (default), k-NN, or variable kernels (Jarosz et al. 2008); "
                         "vpm: progressive per-pixel radii (fixed, the default) or a k-NN radius at each sample")
@@ -115,8 +118,8 @@ def run(args) -> int:
     if args.threads is not None:
         opts["threads"] = args.threads
     if args.shift is not None:
-        owner = "gvpm" if args.shift in VOLUME_SHIFT_CHOICES else "gpt"
-        if args.integrator != owner:
+        owner = "gvpm/gbre" if args.shift in VOLUME_SHIFT_CHOICES else "gpt"
+        if args.integrator not in owner.split("/"):
             print(f"gdlearn render: --shift {args.shift} applies to --integrator {owner}, not {args.integrator}",
                   file=sys.stderr)
             return 2

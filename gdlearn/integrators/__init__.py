@@ -20,6 +20,7 @@ REGISTRY = {
     "vpm": "gdlearn.integrators.photon.volumetric:VPM",
     "bre": "gdlearn.integrators.photon.volumetric:BRE",
     "gvpm": "gdlearn.integrators.photon.gvpm:GVPM",
+    "gbre": "gdlearn.integrators.photon.gbre:GBRE",
 }
 
 

@@ -111,3 +111,61 @@ def truncated_distance_pdf(sigma, s, t):
         return 1.0 / s if s < math.inf else 0.0
     em = -math.expm1(-sigma * s) if s < math.inf else 1.0
     return sigma * math.exp(-sigma * t) / em
+
+
+#: ray_frame_copy refuses rays closer to antiparallel than this (1 + w . w'): the rotation's axis is
+#: undefined there; neighbouring pixels' rays never come near it, so it only guards the division
+ANTIPARALLEL = 1e-9
+
+
+@leaf
+def ray_frame_rotation(w, w_off):
+    """The rotation R with R w = w' that turns least -- about w x w' by the angle between them
+    (Rodrigues, ``R = c I + [v]x + v v^T / (1 + c)``, v = w x w', c = w . w'; stable as c -> 1, no
+    cancellation). It carries a frame around the base ray onto one around the offset ray by parallel
+    transport, continuous in both directions for every ray orientation (a frame built from each
+    direction alone, Duff et al.'s ONB, jumps where n_z changes sign; PHOTONS.md Sec. 7, "frames").
+    The rotation from w' back to w is exactly R^T (v changes sign, c does not), so the G-BRE-2D
+    shift and its reverse are inverses. Returns ``(ok, rows of R)``; not ok for (near-)antiparallel rays."""
+    c = w[0] * w_off[0] + w[1] * w_off[1] + w[2] * w_off[2]
+    v = (w[1] * w_off[2] - w[2] * w_off[1], w[2] * w_off[0] - w[0] * w_off[2], w[0] * w_off[1] - w[1] * w_off[0])
+    eye = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    if not 1.0 + c > ANTIPARALLEL:
+        return False, eye
+    k = 1.0 / (1.0 + c)
+    return True, ((c + k * v[0] * v[0], -v[2] + k * v[0] * v[1], v[1] + k * v[0] * v[2]),
+                  (v[2] + k * v[1] * v[0], c + k * v[1] * v[1], -v[0] + k * v[1] * v[2]),
+                  (-v[1] + k * v[2] * v[0], v[0] + k * v[2] * v[1], c + k * v[2] * v[2]))
+
+
+@leaf
+def ray_frame_copy(b, d, w, d_off, w_off):
+    """The G-BRE-2D photon shift (Gruson et al. 2018, Sec. 5.1, Fig. 6d; PHOTONS.md Sec. 5.6): the
+    photon b, seen from its gather point d (its projection on the base camera ray of direction w), is
+    copied rigidly into the offset ray's frame, ``b' = d' + R (b - d)`` with R of
+    :func:`ray_frame_rotation` and d' = c' + t w' the distance copy of d. R w = w' and R preserves
+    lengths, so d' b' is perpendicular to the offset ray, ``|d' b'| = |d b|`` (the 2D kernel has the
+    same value at both), and b' projects onto the offset ray at the same t. A rotation and a
+    translation: ``|db'/db| = 1`` (:data:`PHOTON_JACOBIAN`). Returns ``(ok, b')``."""
+    ok, rot = ray_frame_rotation(w, w_off)
+    e = _sub(b, d)
+    out = (d_off[0] + rot[0][0] * e[0] + rot[0][1] * e[1] + rot[0][2] * e[2],
+           d_off[1] + rot[1][0] * e[0] + rot[1][1] * e[1] + rot[1][2] * e[2],
+           d_off[2] + rot[2][0] * e[0] + rot[2][1] * e[1] + rot[2][2] * e[2])
+    return ok, out
+
+
+@leaf
+def ray_frame_copy_inverse(b_off, d, w, d_off, w_off):
+    """The inverse of :func:`ray_frame_copy` (the reverse shift, from the offset ray back to the base
+    one): ``b = d + R^T (b' - d')``, which is the same copy with the two frames swapped."""
+    return ray_frame_copy(b_off, d_off, w_off, d, w)
+
+
+@leaf
+def chord_half(r, dperp2):
+    """Half the chord a ray cuts through a ball of radius r whose centre lies dperp2 (squared) from
+    it: sqrt(r^2 - d_perp^2), 0 outside. The uniform density of a BRE-3D gather point on that chord
+    is 1 / (2 half) (Gruson et al. 2018, Sec. 5.1, "Point-Beam 3D"; PHOTONS.md Sec. 3.7)."""
+    q = r * r - dperp2
+    return math.sqrt(q) if q > 0.0 else 0.0

@@ -1,0 +1,145 @@
+"""The gradient-domain beam radiance estimate (``gbre``; Gruson et al. 2018, "Gradient-Domain Volumetric
+Photon Density Estimation", Sec. 5.1 and 6.1; PHOTONS.md Sec. 5.6, 5.9-5.11).
+
+The BRE (:class:`gdlearn.integrators.photon.volumetric.BRE`, point-beam) whose every camera path is
+shifted to its four neighbours and every gathered photon follows (:mod:`gdlearn.integrators.photon.gbre_gather`):
+
+* ``kernel="3d"`` (default, the paper's): a ball at each photon, the gather point uniform on the
+  chord the camera beam cuts through it; the photon follows by G-VPM's mixed (default, Eq. 16) or
+  simple shift, the MIS ratio carrying the offset's own chord density;
+* ``kernel="2d"``: Jarosz et al. 2008's biweight disc facing the ray; the photon follows by the
+  rigid ray-frame copy (:func:`gdlearn.shifts.volume_photon.ray_frame_copy`) and is reconnected.
+  ``shift="mixed"`` is refused: two discs facing different rays overlap in a null set.
+
+The frame carries, like ``gvpm``'s, ``primal`` (the MIS-weighted one with the offset paths reused,
+:func:`gdlearn.integrators.gradients.mis_primal`), ``primal_base`` (the BRE's own estimate -- bit
+for bit the same photons, kernels and chord points when ``subsets=False``), ``gx``, ``gy`` for the
+reconstructions (``--recon``), and the shift counts ``shift_null``, ``shift_mixed``,
+``shift_reconnected``, ``shift_failed`` per camera sample (the mean of the passes, as every image).
+
+``subsets=True`` (default, as the paper's code; PHOTONS.md Sec. 5.10): a pixel of parity
+(x + y) mod 2 gathers only the photons of light paths of that parity, weighted up, for its base and
+its shifts; its neighbours use the other half, and with primal reuse every pixel's primal sees
+both. The radius is the BRE's global schedule (Knaus & Zwicker 2011, one radius for every photon,
+r_i = r_1 prod (j + alpha) / (j + 1) to the power 1/k, k the kernel's dimension), so each pass
+is an independent estimate and the frame their mean; ``volume_radius=r, alpha=1`` keeps r fixed
+and the gradients unbiased for the differences of the blurred image (tests/test_gbre.py).
+
+Only light transport ending in the medium (``transport="media"``, the paper's experiments,
+PHOTONS.md E15) and fixed global radii: a photon's k-NN or variable radius is not defined at its
+shifted position.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from gdlearn.integrators.base import PassResult
+from gdlearn.integrators.gradients import combine_gradients, mis_primal
+from gdlearn.integrators.photon import gbre_gather as gb
+from gdlearn.integrators.photon import gvpm_gather as gg
+from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
+from gdlearn.integrators.photon.volumetric import BRE
+from gdlearn.photons import bbh as bbh_mod
+
+SHIFTS = ("mixed", "simple")
+COUNTS = ("null", "mixed", "reconnected", "failed")
+
+
+def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
+    """wsub[hh, g]: the light paths of half hh over those of parity g among them (half hh holds paths
+    hh n .. (hh + 1) n - 1, n = ``n_half``), so the subset's sum is unbiased for the half's (2 for an
+    even n; an odd n leaves one parity one path more). All ones without subsets."""
+    w = np.ones((2, 2))
+    if subsets:
+        for hh in range(2):
+            lo, hi = hh * n_half, (hh + 1) * n_half
+            for g in range(2):
+                count = (hi - g + 1) // 2 - (lo - g + 1) // 2       # i in [lo, hi) with i = g mod 2
+                w[hh, g] = n_half / count if count > 0 else 0.0
+    return w
+
+
+class GBRE(BRE):
+    """``make("gbre", scene, transport="media", kernel="3d", shift=None, subsets=True, seed=0,
+    photons_per_pass=100000, alpha=0.7, volume_radius=None, volume_radius_scale=1.0, neighbors=32,
+    effects=None, max_depth=None, threads=None)`` (module docstring); ``shift`` None is "mixed" for
+    the 3D kernel and the ray-frame copy ("simple") for the 2D one."""
+
+    name = "gbre"
+
+    def __init__(self, scene, *, kernel: str = "3d", shift: str | None = None, subsets: bool = True,
+                 transport: str = "all", radii: str = "fixed", **options):
+        if transport != "media":
+            raise ValueError(f"gbre: transport={transport!r} is not supported yet -- it renders light transport "
+                             "ending in the medium only (the paper's setting); fix: --transport media "
+                             "(transport=\"media\"), and compare against bre with --transport media")
+        if shift is None:
+            shift = "mixed" if kernel == "3d" else "simple"
+        if shift not in SHIFTS:
+            raise ValueError(f"gbre: shift={shift!r}; choose mixed (Gruson et al. 2018, Eq. 16; 3d kernel) or simple")
+        if kernel == "2d" and shift == "mixed":
+            raise ValueError("gbre: the mixed shift needs a 3D kernel -- two discs facing different camera rays "
+                             "overlap in a null set (Gruson et al. 2018, Sec. 5.1); fix: --kernel 3d, or "
+                             "--shift simple with --kernel 2d (the rigid ray-frame copy)")
+        if radii != "fixed":
+            raise ValueError(f"gbre: radii={radii!r} has no shift (a photon's k-NN or variable radius is not "
+                             "defined where the shift moves it); fix: drop --radii (one global radius schedule)")
+        super().__init__(scene, kernel=kernel, transport=transport, radii="fixed", **options)
+        self.shift, self.subsets = shift, bool(subsets)
+        self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets)
+        self.wsub = subset_weights(self.n_half, self.subsets)
+
+    def _gbre(self, lp, bbhs, r, sample0, h, w):
+        out = gg.allocate(h, w)
+        with self.setup.parallel(h):
+            gb.gbre_rows(self.setup.sa, lp, bbhs, float(r), self.gather_params, self.gp, self.wsub, self.seed,
+                         sample0, out)
+        return out
+
+    def compile(self) -> float:
+        t0 = time.perf_counter()
+        super().compile()
+        lp = self.tracer.trace(self.seed, 0, 0, 4)
+        b = bbh_mod.build(np.zeros((0, 3)), np.zeros(0))
+        self._gbre(lp, (b, b, b, b), 0.1, FOOTPRINT_SAMPLE, 2, 2)
+        return time.perf_counter() - t0
+
+    def build(self, lp):
+        """Per half, one hierarchy per light-path parity (subsets) or the half's own, twice."""
+        bbhs = []
+        r = 0.0
+        for sel in self._halves(lp, self._volume_rows(lp)):
+            radius = self.photon_radii(lp, sel, self._pass)
+            r = float(radius[0]) if radius.size else max(self.rv0 * self._factor(self._pass, self.method), self.r_min)
+            parts = [sel[lp.path[sel] % 2 == g] for g in range(2)] if self.subsets else [sel]
+            for p in parts:
+                b = bbh_mod.build(lp.pos[p], np.full(p.size, r))
+                bbhs.append(b._replace(order=p[b.order]))     # the hierarchy answers vertex rows
+            if not self.subsets:
+                bbhs.append(bbhs[-1])
+        self._nvol = int(sum(s.size for s in self._halves(lp, self._volume_rows(lp))))
+        return lp, tuple(bbhs), r
+
+    def gather(self, accel, pass_index: int) -> PassResult:
+        lp, bbhs, r = accel
+        out = self._gbre(lp, bbhs, r, 2 * pass_index, self.height, self.width)
+        est = out.phi / self.n_half                           # (2, 9, H, W, 3): the kernel is inside
+        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy")}
+        for b in est:
+            gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # the MIS weights are inside the buffers
+            for name, img in zip(("primal", "primal_base", "gx", "gy"), (mis_primal(b), b[0], gx, gy)):
+                halves[name].append(img)
+        for i, name in enumerate(COUNTS):
+            halves[f"shift_{name}"] = [out.count[0, i], out.count[1, i]]
+        images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
+        self._r_now = r
+        stats = {"light_paths": 2 * self.n_half, "light_vertices": len(lp), "volume_photons": self._nvol,
+                 "volume_photons_gathered": int(out.m.sum()), "nonfinite_samples": int(out.bad.sum())}
+        for i, name in enumerate(COUNTS):
+            stats[f"photon_shifts_{name}"] = int(out.count[:, i].sum())
+        return PassResult(images=images, spp=2, halves={n: tuple(v) for n, v in halves.items()}, stats=stats)
+
+    def pass_state(self) -> dict:
+        return {"alpha": self.alpha, "volume_radius": self._r_now}

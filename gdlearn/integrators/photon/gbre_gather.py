@@ -1,0 +1,273 @@
+"""The camera pass of the gradient-domain beam radiance estimate, G-BRE (Gruson et al. 2018, Sec. 5.1,
+Fig. 6b/6d; PHOTONS.md Sec. 5.6, 5.9-5.11), light transport ending in the medium.
+
+Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrators.photon.volume_gather`):
+
+1. **Base**: the camera path with long beams and, on every beam, the BRE of
+   :func:`gdlearn.integrators.photon.volume_estimates.bre_beam` -- the same photons (the
+   bounding-box hierarchy's), the same kernel weights and, in 3D, the same random number per
+   (beam, photon row) for the chord point, so the base buffer *is* the BRE's medium estimate.
+2. **Offset camera subpaths**: G-VPM's random replay from the neighbour's film position
+   (:func:`gdlearn.integrators.photon.gvpm_gather._offset_path`: same structure or the shift
+   fails; a neighbour outside the image is a failed shift, PHOTONS.md E12). Every beam is gathered,
+   none is selected, so there is no beam-selection probability in the MIS ratio.
+3. **Camera distance copy** (Eq. 14-15): the gather point's t on the offset's beam b; fails where that
+   beam is shorter.
+4. **Photon shift** and light subpath, per kernel:
+
+   - *3D* (:func:`shift_3d`, the paper's): d = c + t w_c with t uniform on b's chord; G-VPM's mixed
+     (Eq. 16) or simple shift relative to (d, d'). Null criterion (Sec. 5.6): ``|d' - b| < r`` and
+     t <= s'. The offset contribution keeps the base's chord density (``f(T x) |J| / p(x)``); the MIS
+     ratio takes the offset's own chord density 1 / (2 D t'), D t' = sqrt(r^2 - d'_perp^2) of b'
+     against the offset ray (PHOTONS.md Sec. 5.6 [analysis]): ``[D t / D t'] x`` the light side's.
+     A chord D t' of 0 (b' on the offset kernel's boundary, a null set) fails the shift.
+   - *2D* (:func:`shift_2d`): d is the photon's projection on the beam; the offset photon is the
+     rigid ray-frame copy (:func:`gdlearn.shifts.volume_photon.ray_frame_copy`, ``|J| = 1``), so the
+     kernel value is the same at d'; every photon is reconnected. No mixed shift: two discs facing
+     different rays overlap in a null set. The MIS ratio is the light side's alone (t is no
+     random variable of a 2D query).
+
+   Reconnections go through :func:`gdlearn.integrators.photon.gvpm_light.reconnect` (visibility
+   over the whole segment, null interfaces crossed as the base edge did).
+5. **Photon subsets** (Sec. 6.1, PHOTONS.md Sec. 5.10, ``subsets``): pixel (x, y) of parity
+   g = (x + y) mod 2 gathers, for its base *and* its shifts, only the photons of light paths whose
+   index has parity g, weighted by ``wsub[hh, g]`` (the half's path count over the subset's: 2 for an
+   even count). Neighbours have opposite parities, so the forward shift of a pair uses one subset
+   and the backward shift the other; both are unbiased for the same integral, and the MIS weights
+   are functions of the paths alone, so they stay complementary.
+
+Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
+kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from gdlearn.kernels.accel.bvh import STACK_SIZE
+from gdlearn.kernels.arrays import borrow, borrowed
+from gdlearn.kernels.camera import camera_ray
+from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.media.medium import medium_params, transmittance
+from gdlearn.kernels.media.phase import hg_eval
+from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.photons import bbh as bbh_mod
+from gdlearn.photons.trace import _borrow_rec
+from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
+    beam_path
+from gdlearn.integrators.photon.gpm_gather import _finite3, _put
+from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_path
+from gdlearn.integrators.photon.gvpm_light import OK, reconnect
+from gdlearn.integrators.photon.volume_estimates import D_CHORD, KERNEL_2D, _admit, ball_volume, biweight
+from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
+from gdlearn.shifts.volume_photon import NULL, REFLECTED, TRANSLATED, camera_distance_copy, chord_half, \
+    photon_shift, ray_frame_copy
+
+
+class GbreParams(NamedTuple):
+    kernel: int           # KERNEL_2D or KERNEL_3D (volume_estimates)
+    mixed: bool           # 3D: the mixed shift (Eq. 16); False: the simple shift
+    subsets: bool         # photon subsets on a checkerboard (module docstring, item 5)
+
+
+_ZERO = (0.0, 0.0, 0.0)
+_ONE = (1.0, 1.0, 1.0)
+
+
+@block
+def _along(o, d, t):
+    return (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+
+
+@block
+def shift_3d(sa, lp, v, o, d, o_off, d_off, t, s_off, r, mixed, stack):
+    """G-BRE-3D's shift of photon row v gathered at d = o + t d on the base beam, to the offset beam
+    (o', d', length s'): (ok, kind, beta_b' / beta_b per channel, offset over base density ratio
+    of Eq. 19, the direction the offset photon arrives along). Module docstring, item 4."""
+    if not camera_distance_copy(t, s_off)[0]:
+        return False, NULL, _ONE, 0.0, _ZERO
+    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    dg, dp = _along(o, d, t), _along(o_off, d_off, t)
+    half = chord_half(r, bbh_mod.perp(o, d, b)[1])
+    b2, kind = photon_shift(b, dg, dp, r, mixed)
+    e = (b2[0] - dp[0], b2[1] - dp[1], b2[2] - dp[2])
+    half2 = chord_half(r, bbh_mod.perp(o_off, d_off, b2)[1])
+    if not (e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r and half2 > 0.0 and half > 0.0):
+        return False, kind, _ONE, 0.0, _ZERO       # b' on K''s boundary: a null set, its reverse weighs 0
+    if kind == NULL:
+        return True, kind, _ONE, half / half2, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+    status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
+    if status != OK:
+        return False, kind, _ONE, 0.0, _ZERO
+    return True, kind, f3, rl * half / half2, w_in
+
+
+@block
+def shift_2d(sa, lp, v, o, d, o_off, d_off, t, s_off, stack):
+    """G-BRE-2D's shift of photon row v (its projection on the base beam at t) by the ray-frame copy,
+    then the reconnection from its parent; returns as :func:`shift_3d` (kind TRANSLATED)."""
+    if not camera_distance_copy(t, s_off)[0]:
+        return False, TRANSLATED, _ONE, 0.0, _ZERO
+    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    ok, b2 = ray_frame_copy(b, _along(o, d, t), d, _along(o_off, d_off, t), d_off)
+    if not ok:
+        return False, TRANSLATED, _ONE, 0.0, _ZERO
+    status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
+    if status != OK:
+        return False, TRANSLATED, _ONE, 0.0, _ZERO
+    return True, TRANSLATED, f3, rl, w_in
+
+
+@block
+def gbre_rows(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out):
+    """Every pixel's two camera samples (sample0 + hh) and their four shifts into ``out`` (a
+    :class:`GvpmOut`); ``bbhs`` holds four hierarchies, (half 0, parity 0), (0, 1), (1, 0), (1, 1)
+    -- without subsets each half's twice --, ``r`` is the pass's global radius, ``wsub`` (2 x 2) the
+    subset weights per half and parity."""
+    _gbre_rows(borrowed(sa), _borrow_rec(lp), bbhs[0], bbhs[1], bbhs[2], bbhs[3], r, prm, gp, wsub, seed, sample0,
+               GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
+
+
+@rows
+def _gbre_rows(sa, lp, b00, b01, b10, b11, r, prm, gp, wsub, seed, sample0, out):
+    for row in prange(out.bad.shape[0]):
+        y = np.int64(row)
+        out.bad[y] = _row(sa, lp, (b00, b01, b10, b11), r, prm, gp, wsub, seed, sample0, out, y)
+
+
+@block
+def _row(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y):
+    hgt, w = out.m.shape[1], out.m.shape[2]
+    nbad = 0
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    beams = np.empty((MAX_BEAMS, BEAM_COLS))
+    bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
+    obeams = np.empty((4, MAX_BEAMS, BEAM_COLS))
+    obstate = np.empty((4, MAX_BEAMS, 2), dtype=np.int64)
+    o_ok = np.zeros(4, dtype=np.bool_)
+    nmax = 1
+    for i in range(4):
+        nmax = max(nmax, bbhs[i].order.shape[0])
+    buf = np.empty(nmax, dtype=np.int64)
+    for x in range(w):
+        par = (x + y) & 1 if gp.subsets else 0
+        for hh in range(2):
+            h = path_state(seed, y * w + x, sample0 + hh)
+            fx = x + rand_at(h, 0)
+            fy = y + rand_at(h, 1)
+            o, d, _ = camera_ray(sa.camera, fx, fy)
+            nb = beam_path(sa, prm, h, o, d, stack, beams, bstate)[11]
+            if nb == 0:
+                continue
+            for k in range(4):
+                o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
+                                       beams, bstate, nb, obeams[k], obstate[k])
+            cnt = 0
+            for b in range(nb):
+                c, bad = _beam(sa, lp, bbhs[2 * hh + par], prm, gp, h, (beams, bstate, b), (obeams, o_ok), r,
+                               wsub[hh, par], buf, stack, out, hh, y, x)
+                cnt += c
+                nbad += bad
+            out.m[hh, y, x] = cnt
+    return nbad
+
+
+@block
+def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, buf, stack, out, hh, y, x):
+    """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
+    shifts: (photons counted, non-finite terms dropped)."""
+    beams, bstate, b = base
+    med = int(beams[b, BEAM_MED])
+    sig, alb, g = medium_params(sa.media[med])
+    oa = np.empty(3)
+    da = np.empty(3)
+    for c in range(3):
+        oa[c] = beams[b, BEAM_O + c]
+        da[c] = beams[b, BEAM_D + c]
+    o = (oa[0], oa[1], oa[2])
+    d = (da[0], da[1], da[2])
+    s = beams[b, BEAM_S]
+    m = int(bstate[b, 1])
+    state = bstate[b, 0]
+    n = bbh_mod.collect(bbh, oa, da, s, gp.kernel, buf)
+    cnt = 0
+    nbad = 0
+    for i in range(min(n, buf.shape[0])):
+        v = buf[i]
+        if not _admit(lp, v, prm, med, m, state):
+            continue
+        tp, dp2 = bbh_mod.perp(o, d, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
+        if gp.kernel == KERNEL_2D:
+            if not (dp2 < r * r and 0.0 < tp < s):
+                continue
+            t = tp
+            kw = biweight(dp2 / (r * r)) / (r * r)
+        else:
+            if not dp2 < r * r:
+                continue
+            half = math.sqrt(r * r - dp2)
+            t = tp + (2.0 * rand_at(h, D_CHORD + (b << 32) + v) - 1.0) * half
+            if not (0.0 < t < s):
+                continue
+            kw = 2.0 * half / ball_volume(r)          # / the base chord density 1 / (2 half)
+        cnt += 1
+        tr = transmittance(sig, t)
+        ph = hg_eval(g, d[0] * lp.d_in[v, 0] + d[1] * lp.d_in[v, 1] + d[2] * lp.d_in[v, 2]) * kw
+        c_b = (beams[b, BEAM_W] * (ph * tr[0] * lp.beta[v, 0]) * ws,
+               beams[b, BEAM_W + 1] * (ph * tr[1] * lp.beta[v, 1]) * ws,
+               beams[b, BEAM_W + 2] * (ph * tr[2] * lp.beta[v, 2]) * ws)
+        if not _finite3(c_b):
+            nbad += 1
+            continue
+        _put(out.phi, hh, 0, y, x, c_b, 1.0)
+        pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
+        nbad += _shift_photon(sa, lp, v, gp, g, (o, d, b, t, r), offs, pre, c_b, stack, out, hh, y, x)
+    return cnt, nbad
+
+
+@block
+def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, stack, out, hh, y, x):
+    """Photon row v (base term c_b; ``pre`` = T(t) beta kernel weight, per channel) shifted to the
+    four offset beams: D_k, S_k and the counts."""
+    o, d, b, t, r = q
+    obeams, o_ok = offs
+    nbad = 0
+    for j in range(4):
+        ok = o_ok[j]
+        kind = NULL
+        c_o = _ZERO
+        ratio = 0.0
+        if ok:
+            ob = obeams[j]
+            o2 = (ob[b, BEAM_O], ob[b, BEAM_O + 1], ob[b, BEAM_O + 2])
+            d2 = (ob[b, BEAM_D], ob[b, BEAM_D + 1], ob[b, BEAM_D + 2])
+            if gp.kernel == KERNEL_2D:
+                ok, kind, f3, ratio, w_in = shift_2d(sa, lp, v, o, d, o2, d2, t, ob[b, BEAM_S], stack)
+            else:
+                ok, kind, f3, ratio, w_in = shift_3d(sa, lp, v, o, d, o2, d2, t, ob[b, BEAM_S], r, gp.mixed, stack)
+            if ok:
+                # f(T x) |J| / p(x): the offset camera weight, the phase at d' for the (new) arrival
+                # direction, the base's T(t) (same t, same medium) and the base's kernel density
+                ph = hg_eval(g, d2[0] * w_in[0] + d2[1] * w_in[1] + d2[2] * w_in[2])
+                c_o = (ob[b, BEAM_W] * ph * pre[0] * f3[0], ob[b, BEAM_W + 1] * ph * pre[1] * f3[1],
+                       ob[b, BEAM_W + 2] * ph * pre[2] * f3[2])
+                if not (_finite3(c_o) and math.isfinite(ratio)):
+                    nbad += 1
+                    ok = False
+                elif not ratio > 0.0:
+                    ok = False
+        if not ok:
+            out.count[hh, C_FAILED, y, x] += 1
+            _put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            continue
+        out.count[hh, C_NULL if kind == NULL else C_RECONNECTED, y, x] += 1
+        if kind == REFLECTED:
+            out.count[hh, C_MIXED, y, x] += 1
+        wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic
+        _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
+        _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
+    return nbad
