@@ -129,8 +129,6 @@ def test_subset_weights():
 
 
 def test_refusals(fog):
-    with pytest.raises(ValueError, match="--transport media"):
-        make("gbre", fog)
     with pytest.raises(ValueError, match="3D kernel"):
         make("gbre", fog, transport="media", kernel="2d", shift="mixed")
     with pytest.raises(ValueError, match="mixed"):
@@ -222,8 +220,8 @@ def _shift(gb, kernel, sa, lp, v, base, offs, t, r, stack):
 
 def test_cli_renders_and_reconstructs(tmp_path):
     """``gdlearn render SCENE --integrator gbre --transport media --kernel 2d|3d --shift ... --recon l1``
-    writes the image and the buffers; --transport all and the mixed shift with the 2D kernel are
-    refused with the fix named; --shift mixed still belongs to gvpm/gbre only."""
+    writes the image and the buffers (the full image: tests/test_gbre_full.py); the mixed shift with
+    the 2D kernel is refused with the fix named; --shift mixed still belongs to gvpm/gbre only."""
     import subprocess
     import sys
     cmd = [sys.executable, "-m", "gdlearn", "render", "scenes/fog-box.xml", "--set", "res=8", "--spp", "4",
@@ -239,8 +237,6 @@ def test_cli_renders_and_reconstructs(tmp_path):
         for name in ("gx", "gy", "primal_base", "shift_null", "shift_reconnected", "shift_failed"):
             assert (bufs / f"{name}.npy").exists()
         assert (np.load(bufs / "shift_null.npy").sum() > 0) == (kernel == "3d")
-    p = subprocess.run(cmd + ["--out", str(out)], capture_output=True, text=True)
-    assert p.returncode == 2 and "--transport media" in p.stderr
     p = subprocess.run(cmd + ["--transport", "media", "--kernel", "2d", "--shift", "mixed", "--out", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 2 and "--kernel 3d" in p.stderr

@@ -64,7 +64,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--alpha", type=float, default=None,
                    help="sppm/ppm/vpm/bre/gvpm/gbre: radius reduction alpha (default 0.7)")
     p.add_argument("--radius", type=float, default=None, metavar="R",
-                   help="sppm/ppm/vpm/bre/gvpm: initial surface radius in scene units (default: the pixel footprint)")
+                   help="sppm/ppm/vpm/bre/gvpm/gbre: initial surface radius in scene units (default: the pixel footprint)")
     p.add_argument("--direct", choices=("photons", "nee"), default=None,
                    help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
     p.add_argument("--volume-radius", type=float, default=None, metavar="R",
@@ -74,8 +74,8 @@ def add_parser(subparsers) -> None:
                    help="vpm/bre/gvpm/gbre: photons per kernel that set the default volume radius, and the k of "
                         "k-NN and variable radii (default 32)")
     p.add_argument("--transport", choices=("all", "media"), default=None,
-                   help="vpm/bre/gvpm/gbre: the full image (default; gvpm: surface gradients by GPM's shifts) or "
-                        "only light transport ending in the medium (gbre: media only for now)")
+                   help="vpm/bre/gvpm/gbre: the full image (default; gvpm/gbre: surface gradients by GPM's shifts) "
+                        "or only light transport ending in the medium")
     p.add_argument("--samples", type=int, default=None, metavar="K",
                    help="vpm/gvpm: distance samples per camera path (default 8)")
     p.add_argument("--kernel", choices=("2d", "3d"), default=None,

@@ -25,12 +25,21 @@ r_i = r_1 prod (j + alpha) / (j + 1) to the power 1/k, k the kernel's dimension)
 is an independent estimate and the frame their mean; ``volume_radius=r, alpha=1`` keeps r fixed
 and the gradients unbiased for the differences of the blurred image (tests/test_gbre.py).
 
-Only light transport ending in the medium (``transport="media"``, the paper's experiments,
-PHOTONS.md E15) and fixed global radii: a photon's k-NN or variable radius is not defined at its
-shifted position.
+``transport="all"`` (default): the BRE's full image -- the emission the camera paths see and the
+surface photon estimate at the first non-specular vertex beside the medium estimate -- with the
+surface part's gradients by G-VPM's surface pass (:func:`gdlearn.integrators.photon.gvol_surface.surface_pass`:
+Hua et al. 2017's shifts on the same replayed offset camera paths, photon edges through media and
+null interfaces), at the BRE's surface radius of the pass (its global schedule per pixel, so every
+pass stays an independent estimate); the emission and its gradients are ``emission``,
+``emission_gx``, ``emission_gy`` and the surface shift counts ``shift_surface_reconnected``,
+``shift_surface_manifold``, ``shift_surface_failed``. The surface part gathers every photon of its
+half (no subsets: they are a device of the beam gather). ``transport="media"``: the medium part
+alone, the paper's experiments (PHOTONS.md E15). Fixed global radii only: a photon's k-NN or
+variable radius is not defined at its shifted position.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -39,9 +48,12 @@ from gdlearn.integrators.base import PassResult
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
 from gdlearn.integrators.photon import gbre_gather as gb
 from gdlearn.integrators.photon import gvpm_gather as gg
+from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
+from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
 from gdlearn.integrators.photon.volumetric import BRE
 from gdlearn.photons import bbh as bbh_mod
+from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
 COUNTS = ("null", "mixed", "reconnected", "failed")
@@ -61,8 +73,20 @@ def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
     return w
 
 
+def _halves(buf, names) -> dict:
+    """Per half of ``buf`` (2, 9, H, W, 3: L, D_k, S_k with the MIS weights inside), the MIS primal,
+    the base and the two gradients under ``names`` (None: not kept)."""
+    out = {n: [] for n in names if n}
+    for b in buf:
+        gx, gy = combine_gradients(b[1:5], (1.0, 1.0))
+        for name, img in zip(names, (mis_primal(b), b[0], gx, gy)):
+            if name:
+                out[name].append(img)
+    return out
+
+
 class GBRE(BRE):
-    """``make("gbre", scene, transport="media", kernel="3d", shift=None, subsets=True, seed=0,
+    """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, seed=0,
     photons_per_pass=100000, alpha=0.7, volume_radius=None, volume_radius_scale=1.0, neighbors=32,
     effects=None, max_depth=None, threads=None)`` (module docstring); ``shift`` None is "mixed" for
     the 3D kernel and the ray-frame copy ("simple") for the 2D one."""
@@ -71,10 +95,6 @@ class GBRE(BRE):
 
     def __init__(self, scene, *, kernel: str = "3d", shift: str | None = None, subsets: bool = True,
                  transport: str = "all", radii: str = "fixed", **options):
-        if transport != "media":
-            raise ValueError(f"gbre: transport={transport!r} is not supported yet -- it renders light transport "
-                             "ending in the medium only (the paper's setting); fix: --transport media "
-                             "(transport=\"media\"), and compare against bre with --transport media")
         if shift is None:
             shift = "mixed" if kernel == "3d" else "simple"
         if shift not in SHIFTS:
@@ -90,6 +110,7 @@ class GBRE(BRE):
         self.shift, self.subsets = shift, bool(subsets)
         self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets)
         self.wsub = subset_weights(self.n_half, self.subsets)
+        self.mtab = manifold_table(scene, self.setup.sa) if self.vparams.surfaces else None
 
     def _gbre(self, lp, bbhs, r, sample0, h, w):
         out = gg.allocate(h, w)
@@ -104,6 +125,10 @@ class GBRE(BRE):
         lp = self.tracer.trace(self.seed, 0, 0, 4)
         b = bbh_mod.build(np.zeros((0, 3)), np.zeros(0))
         self._gbre(lp, (b, b, b, b), 0.1, FOOTPRINT_SAMPLE, 2, 2)
+        if self.vparams.surfaces:
+            g = hashgrid.build(np.zeros((0, 3)), 1.0)
+            surface_pass(self.setup, lp, (g, g), self.mtab, self.gather_params, self.seed, FOOTPRINT_SAMPLE,
+                         np.full((2, 2), 0.1))
         return time.perf_counter() - t0
 
     def build(self, lp):
@@ -120,26 +145,46 @@ class GBRE(BRE):
             if not self.subsets:
                 bbhs.append(bbhs[-1])
         self._nvol = int(sum(s.size for s in self._halves(lp, self._volume_rows(lp))))
-        return lp, tuple(bbhs), r
+        return lp, tuple(bbhs), r, self._surface_grids_at(lp)
+
+    def _surface(self, lp, sgrids, pass_index):
+        """The surface part of the pass at the BRE's radius of this pass: (photon density + emission
+        buffers, (2, 9, H, W, 3) each, per light path of a half), and the GpmOut."""
+        r2 = self._r2_now
+        out = surface_pass(self.setup, lp, sgrids, self.mtab, self.gather_params, self.seed, 2 * pass_index,
+                           np.sqrt(r2))
+        return out.phi / (math.pi * r2[None, None, :, :, None] * self.n_half), out.le, out
 
     def gather(self, accel, pass_index: int) -> PassResult:
-        lp, bbhs, r = accel
+        lp, bbhs, r, sgrids = accel
         out = self._gbre(lp, bbhs, r, 2 * pass_index, self.height, self.width)
         est = out.phi / self.n_half                           # (2, 9, H, W, 3): the kernel is inside
-        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy")}
-        for b in est:
-            gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # the MIS weights are inside the buffers
-            for name, img in zip(("primal", "primal_base", "gx", "gy"), (mis_primal(b), b[0], gx, gy)):
-                halves[name].append(img)
+        if self.vparams.surfaces:
+            dens, le, sout = self._surface(lp, sgrids, pass_index)
+            halves = {**_halves(est + dens + le, ("primal", "primal_base", "gx", "gy")),
+                      **_halves(le, ("emission", None, "emission_gx", "emission_gy"))}
+        else:
+            halves = _halves(est, ("primal", "primal_base", "gx", "gy"))
         for i, name in enumerate(COUNTS):
             halves[f"shift_{name}"] = [out.count[0, i], out.count[1, i]]
+        if self.vparams.surfaces:
+            for name, i in SURFACE_COUNTS:
+                halves[f"shift_surface_{name}"] = [sout.count[0, i], sout.count[1, i]]
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         self._r_now = r
         stats = {"light_paths": 2 * self.n_half, "light_vertices": len(lp), "volume_photons": self._nvol,
                  "volume_photons_gathered": int(out.m.sum()), "nonfinite_samples": int(out.bad.sum())}
         for i, name in enumerate(COUNTS):
             stats[f"photon_shifts_{name}"] = int(out.count[:, i].sum())
+        if self.vparams.surfaces:
+            for name, i in SURFACE_COUNTS:
+                stats[f"surface_photon_shifts_{name}"] = int(sout.count[:, i].sum())
+            stats["photons_gathered"] = int(sout.m.sum())
+            stats["nonfinite_samples"] += int(sout.bad.sum())
         return PassResult(images=images, spp=2, halves={n: tuple(v) for n, v in halves.items()}, stats=stats)
 
     def pass_state(self) -> dict:
-        return {"alpha": self.alpha, "volume_radius": self._r_now}
+        state = {"alpha": self.alpha, "volume_radius": self._r_now}
+        if self.vparams.surfaces:
+            state["mean_radius"] = float(np.sqrt(self._r2_now).mean())
+        return state

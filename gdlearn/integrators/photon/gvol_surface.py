@@ -50,10 +50,14 @@ from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, parent_ok, pixel_angle
-from gdlearn.integrators.photon.gpm_gather import FAILED, _borrow_out, _finite3, _offset, _put, allocate
+from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, _borrow_out, _finite3, _offset, _put, \
+    allocate
 from gdlearn.integrators.photon.gvol_surface_light import shift_surface_photon
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
+
+#: the images of the surface shift counts and their rows in GpmOut.count (gpm_gather's outcomes)
+SURFACE_COUNTS = (("reconnected", RECONNECTED), ("manifold", MANIFOLD), ("failed", FAILED))
 
 
 def surface_pass(setup, lp, grids, mtab, prm, seed, sample0, radius):

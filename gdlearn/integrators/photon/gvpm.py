@@ -48,16 +48,14 @@ from gdlearn.integrators.base import PassResult
 from gdlearn.integrators.gradients import combine_gradients, mis_primal
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon import gvpm_gather as gg
-from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED
-from gdlearn.integrators.photon.gvol_surface import surface_pass
+from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, accumulate_density, reduce_radius
 from gdlearn.integrators.photon.volumetric import VPM, reduce_radius3
 from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
-#: the medium part's shift counts (gvpm_gather.C_*) and the surface part's (gpm_gather's outcomes)
+#: the medium part's shift counts (gvpm_gather.C_*)
 _MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed")
-_SURFACE_COUNTS = (("reconnected", RECONNECTED), ("manifold", MANIFOLD), ("failed", FAILED))
 
 
 class GVPM(VPM):
@@ -156,7 +154,7 @@ class GVPM(VPM):
         for i, name in enumerate(_MEDIUM_COUNTS):
             stats[f"photon_shifts_{name}"] = int(out.count[:, i].sum())
         if sout is not None:
-            for name, i in _SURFACE_COUNTS:
+            for name, i in SURFACE_COUNTS:
                 images[f"shift_surface_{name}"] = self.scounts[i].copy()
                 stats[f"surface_photon_shifts_{name}"] = int(sout.count[:, i].sum())
             stats["photons_gathered"] = int(sout.m.sum())
