@@ -7,7 +7,7 @@ photon follows it:
 * **Eq. 5**, the offset photon's target: the photon's position relative to the gather point,
   copied in the local tangent frames, ``y*_s = z'_t + M' M^-1 (y_s - z_t)`` (M, M' the shading
   frames at z_t and z'_t, :func:`offset_target`). The frames are Duff et al. 2017's branchless ones
-  (:func:`gdlearn.kernels.vec.coordinate_system`): continuous in the normal except where its z
+  (``gdlearn.kernels.vec.coordinate_system``): continuous in the normal except where its z
   component changes sign, so neighbouring pixels on one flat surface get the same frame and y* is
   y_s translated by z'_t - z_t (across that seam the frames differ by a flip: less correlation, no
   bias).
@@ -85,7 +85,7 @@ def projection_jacobian(y_parent, y_star, n_star, y_hit, n_hit):
 def emission_profile(emitters, em, n0, d):
     """(value, pdf) of an emitter vertex y_0 sending light along ``d``: the directional factor of
     Le (cos theta for an area light, one-sided; 1 for a point light; the falloff for a spot) and the
-    solid-angle density the light tracer samples d with (:func:`gdlearn.photons.emit.sample_emission`).
+    solid-angle density the light tracer samples d with (``gdlearn.photons.emit.sample_emission``).
     (0, 0) where the direction cannot be emitted or the emitter is a far one (directional,
     environment), which the shift does not handle."""
     et = int(emitters[em, EM_TYPE])

@@ -8,7 +8,7 @@ separates into |db'/db| |dd'/dd|):
 
 * **camera distance copy** (Sec. 4.1, Eq. 14-15): d' = c' + t w'_c, the same distance t on the
   offset's beam. In the (direction, distance) parametrisation of a volume point the distance part of
-  the Jacobian is dt'/dt = 1 (:data:`gdlearn.shifts.distance.JACOBIAN`). The shift fails where
+  the Jacobian is dt'/dt = 1 (``gdlearn.shifts.distance.JACOBIAN``). The shift fails where
   the offset's beam is shorter than t (:func:`camera_distance_copy`); the region of a longer offset
   beam that no base reaches is the reverse shift's failure, so the pair stays unbiased.
 * **photon shifts** (Sec. 4.2, Eq. 16), K = Ball(d, r), K' = Ball(d', r), u = (d' - d) / |d' - d|:

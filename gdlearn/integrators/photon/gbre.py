@@ -87,8 +87,9 @@ def _halves(buf, names) -> dict:
 
 class GBRE(BRE):
     """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, seed=0,
-    photons_per_pass=100000, alpha=0.7, volume_radius=None, volume_radius_scale=1.0, neighbors=32,
-    effects=None, max_depth=None, threads=None)`` (module docstring); ``shift`` None is "mixed" for
+    photons_per_pass=100000, alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None,
+    volume_radius_scale=1.0, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
+    docstring; ``radius``: the surface part's initial radius, transport="all" only); ``shift`` None is "mixed" for
     the 3D kernel and the ray-frame copy ("simple") for the 2D one."""
 
     name = "gbre"

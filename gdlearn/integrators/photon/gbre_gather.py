@@ -8,7 +8,7 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    bounding-box hierarchy's), the same kernel weights and, in 3D, the same random number per
    (beam, photon row) for the chord point, so the base buffer *is* the BRE's medium estimate.
 2. **Offset camera subpaths**: G-VPM's random replay from the neighbour's film position
-   (:func:`gdlearn.integrators.photon.gvpm_gather._offset_path`: same structure or the shift
+   (``gdlearn.integrators.photon.gvpm_gather._offset_path``: same structure or the shift
    fails; a neighbour outside the image is a failed shift, PHOTONS.md E12). Every beam is gathered,
    none is selected, so there is no beam-selection probability in the MIS ratio.
 3. **Camera distance copy** (Eq. 14-15): the gather point's t on the offset's beam b; fails where that
@@ -125,7 +125,7 @@ def shift_2d(sa, lp, v, o, d, o_off, d_off, t, s_off, stack):
 @block
 def gbre_rows(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out):
     """Every pixel's two camera samples (sample0 + hh) and their four shifts into ``out`` (a
-    :class:`GvpmOut`); ``bbhs`` holds four hierarchies, (half 0, parity 0), (0, 1), (1, 0), (1, 1)
+    :class:`~gdlearn.integrators.photon.gvpm_gather.GvpmOut`); ``bbhs`` holds four hierarchies, (half 0, parity 0), (0, 1), (1, 0), (1, 1)
     -- without subsets each half's twice --, ``r`` is the pass's global radius, ``wsub`` (2 x 2) the
     subset weights per half and parity."""
     _gbre_rows(borrowed(sa), _borrow_rec(lp), bbhs[0], bbhs[1], bbhs[2], bbhs[3], r, prm, gp, wsub, seed, sample0,

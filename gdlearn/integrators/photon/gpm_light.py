@@ -5,14 +5,14 @@ manifold branch (Eq. 7-8) for a photon whose parent lies on a specular chain.
 
 The light subpath is y_b -> y_{b+1} .. y_{s-1} -> y_s, with y_b the last non-specular vertex (a
 diffuse or glossy surface, or the emitter) and y_{b+1} .. y_{s-1} k = 1..MAX_CHAIN vertices on delta
-BSDFs of analytic shapes (spheres, rectangles: :func:`gdlearn.integrators.path.gpt_surface.manifold.manifold_table`).
+BSDFs of analytic shapes (spheres, rectangles: ``gdlearn.integrators.path.gpt_surface.manifold.manifold_table``).
 The offset photon y'_s is y* (Eq. 5) projected from the base parent y_{s-1}; the Newton walk of
-:func:`gdlearn.shifts.manifold.manifold_walk` (at most 5 iterations, the paper's) then moves the chain
+``gdlearn.shifts.manifold.manifold_walk`` (at most 5 iterations, the paper's) then moves the chain
 so that it joins the fixed y_b to y'_s with every half vector kept. Jacobian (Eq. 7):
 
     |dy'_{b+1}/dy_{b+1}| = |dy'_{b+1}/dy'_s| |dy'_s/dy_s| |dy_s/dy_{b+1}|,
 
-the outer factors the generalised geometry ratios of Eq. 8 (:func:`gdlearn.shifts.manifold.chain_endpoint_det`,
+the outer factors the generalised geometry ratios of Eq. 8 (``gdlearn.shifts.manifold.chain_endpoint_det``,
 the implicit function theorem on the half-vector constraints with y_b fixed), the middle one Eq. 6.
 In the solid angle of the direction leaving y_b (what the light tracer sampled) it is multiplied by
 (|cos'_{b+1}| / d'^2) / (|cos_{b+1}| / d^2). The offset photon's power, in ratio form:

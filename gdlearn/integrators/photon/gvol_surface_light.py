@@ -7,8 +7,8 @@ The offset photon y'_s is GPM's: y* = Eq. 5's rigid copy of y_s into the offset 
 projected from the photon's parent a = y_{s-1} (Eq. 6) -- the first surface other than a null
 interface on the ray a -> y*, so the projection walks through a medium's index-matched boundary as
 the light tracer did (:func:`walk_to_surface`). The parent is the nearest ancestor that is not a null
-interface (:func:`gdlearn.integrators.photon.gvpm_light._ancestor`), and it is re-evaluated towards
-the new direction by :func:`gdlearn.integrators.photon.gvpm_light._parent_ratio`: the phase function
+interface (``gdlearn.integrators.photon.gvpm_light._ancestor``), and it is re-evaluated towards
+the new direction by ``gdlearn.integrators.photon.gvpm_light._parent_ratio``: the phase function
 at a medium vertex (HG is sampled exactly: value ratio = density ratio), GPM's
 :func:`gdlearn.integrators.photon.gpm_light.parent_factor` at a surface or an emitter. In ratio form,
 with beta the photon's power (its light subpath's f / p, the edge's T / P(pass) included;
@@ -149,7 +149,7 @@ def _reversible(sa, lp, q, child, ys, yh, ystar, p, frame, p2, frame2, r, stack)
 @block
 def reconnect_surface(sa, lp, prm, v, q, child, n_null, ystar, nstar, p2, r, stack):
     """Photon row v's parent a = row q (its nearest non-null ancestor; ``child`` the row after it, the
-    edge crossing ``n_null`` null interfaces: :func:`gdlearn.integrators.photon.gvpm_light._ancestor`)
+    edge crossing ``n_null`` null interfaces: ``gdlearn.integrators.photon.gvpm_light._ancestor``)
     reconnected through y* (normal nstar) to the offset photon y'_s, which must lie within r of the
     offset gather point p2. Returns (status OK | FAIL | FAIL_SPECULAR (a specular parent), power
     ratio beta'_s / beta_s per channel, MIS density ratio, direction a -> y'_s, y'_s)."""
