@@ -15,7 +15,7 @@ photon follows it:
   traces it). The map y* -> y'_s keeps the direction from y_{s-1}, so it preserves solid angle
   there and (Eq. 6)
 
-      |dy'_s / dy_s| = G(y_{s-1}, y*_s) / G(y_{s-1}, y'_s) = (cos*_ / d*^2) / (cos'_ / d'^2),
+      ``|dy'_s / dy_s|`` = G(y_{s-1}, y*_s) / G(y_{s-1}, y'_s) = (cos*_ / d*^2) / (cos'_ / d'^2),
 
   cos* taken with the normal of y*'s plane -- the photon's own normal carried by the rigid map of
   Eq. 5 (the reference code takes the offset gather point's, the same for a photon on the gather

@@ -4,14 +4,14 @@ PHOTONS.md Sec. 5.2-5.3).
 A G-VPM path merges a light subpath ending at the photon b (parent a) with a camera subpath whose
 last edge, the camera beam from c, holds the gather point d = c + t w_c. Shifting the pixel moves the
 camera beam to c' + t w'_c; the kernel vertices follow (Gruson et al. 2018, Eq. 13: the Jacobian
-separates into |db'/db| |dd'/dd|):
+separates into ``|db'/db|`` ``|dd'/dd|``):
 
 * **camera distance copy** (Sec. 4.1, Eq. 14-15): d' = c' + t w'_c, the same distance t on the
   offset's beam. In the (direction, distance) parametrisation of a volume point the distance part of
   the Jacobian is dt'/dt = 1 (``gdlearn.shifts.distance.JACOBIAN``). The shift fails where
   the offset's beam is shorter than t (:func:`camera_distance_copy`); the region of a longer offset
   beam that no base reaches is the reverse shift's failure, so the pair stays unbiased.
-* **photon shifts** (Sec. 4.2, Eq. 16), K = Ball(d, r), K' = Ball(d', r), u = (d' - d) / |d' - d|:
+* **photon shifts** (Sec. 4.2, Eq. 16), K = Ball(d, r), K' = Ball(d', r), u = (d' - d) / ``|d' - d|``:
 
   - *simple*: b' = b + (d' - d), a translation (:func:`simple_shift`);
   - *null*: b' = b, free, but only the photons already in K' are reachable;
@@ -19,12 +19,12 @@ separates into |db'/db| |dd'/dd|):
     overlap, already covered by the null part) it is reflected across the plane through d'
     perpendicular to u, ``b' = b* + 2 u^T (d' - b*) u`` (:func:`mixed_shift`).
 
-  The mixed shift is a bijection K -> K' with |J| = 1 (PHOTONS.md Sec. 5.3): the translation maps
+  The mixed shift is a bijection K -> K' with ``|J|`` = 1 (PHOTONS.md Sec. 5.3): the translation maps
   K \\ K' onto K' \\ K'' (K'' = Ball(d' + D u, r)); the reflection R' across the plane through d'
   maps K' onto itself and K' \\ K'' onto K' \\ K, so the translated pieces that land in K are moved
   onto exactly the part of K' \\ K the translation missed. Its inverse is the same construction
   from the offset pixel (d' -> d), which returns b exactly (tests/test_shifts_volume_photon.py).
-  Translations and reflections preserve volume, hence |db'/db| = 1 (:data:`PHOTON_JACOBIAN`).
+  Translations and reflections preserve volume, hence ``|db'/db|`` = 1 (:data:`PHOTON_JACOBIAN`).
 
 Everything here is a pure function of 3-vectors (tuples), callable from numba and from Python.
 """
@@ -32,7 +32,7 @@ import math
 
 from gdlearn.kernels.jit import leaf
 
-#: |db'/db| of the simple and the mixed shift (translation, reflection: volume preserving)
+#: ``|db'/db|`` of the simple and the mixed shift (translation, reflection: volume preserving)
 PHOTON_JACOBIAN = 1.0
 #: outcomes of :func:`mixed_shift` / :func:`simple_shift`: the photon kept (b' = b), translated, or
 #: translated and reflected (Eq. 16)
@@ -75,8 +75,8 @@ def mixed_shift(b, d, d_off, r):
     """The mixed photon shift, Gruson et al. 2018, Eq. 16, for a photon b in K = Ball(d, r) moved
     to K' = Ball(d', r): returns ``(b', kind)``, kind NULL (b in K': b' = b), TRANSLATED
     (b' = b + (d' - d), outside K) or REFLECTED (b* = b + (d' - d) fell into K, so
-    ``b' = b* + 2 u^T (d' - b*) u``, u = (d' - d) / |d' - d|: the mirror image across the plane
-    through d' perpendicular to u). Membership is strict (|x - centre| < r), as the gather's."""
+    ``b' = b* + 2 u^T (d' - b*) u``, u = (d' - d) / ``|d' - d|``: the mirror image across the plane
+    through d' perpendicular to u). Membership is strict (``|x - centre|`` < r), as the gather's."""
     if _dist2(b, d_off) < r * r:
         return b, NULL
     e = _sub(d_off, d)

@@ -10,12 +10,12 @@ The offset photon y'_s is y* (Eq. 5) projected from the base parent y_{s-1}; the
 ``gdlearn.shifts.manifold.manifold_walk`` (at most 5 iterations, the paper's) then moves the chain
 so that it joins the fixed y_b to y'_s with every half vector kept. Jacobian (Eq. 7):
 
-    |dy'_{b+1}/dy_{b+1}| = |dy'_{b+1}/dy'_s| |dy'_s/dy_s| |dy_s/dy_{b+1}|,
+    ``|dy'_{b+1}/dy_{b+1}|`` = ``|dy'_{b+1}/dy'_s|`` ``|dy'_s/dy_s|`` ``|dy_s/dy_{b+1}|``,
 
 the outer factors the generalised geometry ratios of Eq. 8 (``gdlearn.shifts.manifold.chain_endpoint_det``,
 the implicit function theorem on the half-vector constraints with y_b fixed), the middle one Eq. 6.
 In the solid angle of the direction leaving y_b (what the light tracer sampled) it is multiplied by
-(|cos'_{b+1}| / d'^2) / (|cos_{b+1}| / d^2). The offset photon's power, in ratio form:
+(``|cos'_{b+1}|`` / d'^2) / (``|cos_{b+1}|`` / d^2). The offset photon's power, in ratio form:
 beta'_s = beta_s [f_b(w') / f_b(w)] J_w prod_j F'_j / F_j (F the delta lobe values of the same
 kind, reflection or refraction, at the offset's own angles), and the light side of the MIS ratio
 p_w(w') / p_w(w) J_w prod_j P'_j / P_j (P the discrete lobe probabilities).

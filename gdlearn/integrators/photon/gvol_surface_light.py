@@ -17,8 +17,8 @@ with beta the photon's power (its light subpath's f / p, the edge's T / P(pass) 
     beta'_s = beta_s [f_a(w') / f_a(w)] [T(a, y'_s) / T(a, y_s)] G*                   (power)
     p'/p    =        [p_a(w') / p_a(w)] [P(a, y'_s) / P(a, y_s)] G*                    (MIS, Eq. 11)
 
-G* = (|cos*| / d*^2) / (|cos_s| / d^2) the geometry-times-Jacobian factor of GPM
-(:func:`gdlearn.shifts.photon.photon_geometry_ratio`: G(a, y') |dy'/dy| / G(a, y), Eq. 6), T the
+G* = (``|cos*|`` / d*^2) / (``|cos_s|`` / d^2) the geometry-times-Jacobian factor of GPM
+(:func:`gdlearn.shifts.photon.photon_geometry_ratio`: G(a, y') ``|dy'/dy|`` / G(a, y), Eq. 6), T the
 transmittance of the edge per channel and P the tracer's probability of passing it without a
 collision (spectral MIS, :func:`gdlearn.kernels.media.medium.pass_probability`), each the product
 over the edge's media segments. In vacuum both media factors are 1 and this is GPM's shift exactly.

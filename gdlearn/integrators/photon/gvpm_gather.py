@@ -27,7 +27,7 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    null shift). (The reference code's base selection probability for the offset cancels in the
    ratio, each way, so its weights are complementary too: E10 makes them the balance heuristic
    proper, not unbiased where they were not.) The offset contribution itself uses the base's
-   densities (f(T x) |J| / p(x), |J| = 1).
+   densities (f(T x) ``|J|`` / p(x), ``|J|`` = 1).
 
 Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample's photons are
 collected once (row and base term, per-row scratch), then each neighbour runs over them with its

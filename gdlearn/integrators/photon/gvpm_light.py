@@ -1,7 +1,7 @@
 """Completing the light subpath of a shifted volume photon in G-VPM (Gruson et al. 2018, Sec. 4.3;
 PHOTONS.md Sec. 5.4): the reconnection from the photon's parent a = y_{s-1} to the offset photon b'.
 
-The photon shift moved b (a medium vertex) to b' in the same medium with |db'/db| = 1 (Eq. 16: no
+The photon shift moved b (a medium vertex) to b' in the same medium with ``|db'/db|`` = 1 (Eq. 16: no
 projection step, unlike surfaces). The light subpath y_0 .. a is kept and the edge a -> b' replaces
 a -> b. In ratio form, with the photon's power beta_b (its light subpath's f / p, the medium's
 sigma_s T / pdf of the edge included; :mod:`gdlearn.photons.records`), the offset photon's power is
@@ -12,7 +12,7 @@ sigma_s T / pdf of the edge included; :mod:`gdlearn.photons.records`), the offse
 with w, w' the directions a -> b, a -> b', l, l' their lengths, f_a the parent's scattering in its
 sampling measure (sigma_s-free phase function at a medium vertex, cosine-weighted adjoint BSDF at a
 surface, the emission profile at an emitter) and T the edge's transmittance per channel: the offset
-contribution f(T x) |dT/dx| / p(x) keeps the base's density p(b | a) = p_w(w) p_l(l) / l^2 (volume
+contribution f(T x) ``|dT/dx|`` / p(x) keeps the base's density p(b | a) = p_w(w) p_l(l) / l^2 (volume
 measure, dV = l^2 dw dl). The light side of the MIS ratio (Eq. 19) is the density of b' over b's,
 
     p(b' | a) / p(b | a) = [p_w(w') / p_w(w)] * [p_l(l') / p_l(l)] * (l^2 / l'^2),
