@@ -151,3 +151,21 @@ def gradient_residuals(frame):
     fdy[:-1] = pb[1:] - pb[:-1]
     gx, gy = frame.gx.mean(-1), frame.gy.mean(-1)
     return np.stack([gx - fdx, gy - fdy, frame.primal.mean(-1) - pb, gx, fdx])
+
+
+def render_cli(tmp_path: Path, args: list[str], res: int, buffers: tuple[str, ...]):
+    """``gdlearn render ARGS --set res=RES --out img.npy --buffers b``: the image is finite, positive
+    and RES x RES, and every named buffer was written (the CLI checks of the gradient photon
+    estimators). Returns the image."""
+    import subprocess
+    import sys
+    import numpy as np
+    out = tmp_path / "img.npy"
+    p = subprocess.run([sys.executable, "-m", "gdlearn", "render", *args, "--set", f"res={res}", "--no-progress",
+                        "--out", str(out), "--buffers", str(tmp_path / "b")], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    img = np.load(out)
+    assert img.shape == (res, res, 3) and np.isfinite(img).all() and img.mean() > 0
+    for name in buffers:
+        assert (tmp_path / "b" / f"{name}.npy").exists(), name
+    return img

@@ -13,7 +13,7 @@ import pytest
 from gdlearn.integrators import make
 from gdlearn.integrators.base import render
 from gdlearn.scene.load import load
-from conftest import gradient_residuals
+from conftest import gradient_residuals, render_cli
 from test_gvpm import _check_z
 
 #: fixed radii (surface 0.12, volume 0.15) and no reduction (alpha = 1): every pass is an independent
@@ -80,14 +80,5 @@ def test_surface_shifts_succeed(runs):
 def test_cli_full_image_without_transport(tmp_path):
     """``gdlearn render scenes/spot-medium.xml --integrator gbre --recon l1`` (no --transport) renders the
     full image and writes the emission gradients and the surface shift counts."""
-    import subprocess
-    import sys
-    out = tmp_path / "img.npy"
-    p = subprocess.run([sys.executable, "-m", "gdlearn", "render", "scenes/spot-medium.xml", "--integrator", "gbre",
-                        "--recon", "l1", "--set", "res=16", "--spp", "4", "--photons", "2000", "--no-progress",
-                        "--out", str(out), "--buffers", str(tmp_path / "b")], capture_output=True, text=True)
-    assert p.returncode == 0, p.stderr
-    img = np.load(out)
-    assert img.shape == (16, 16, 3) and np.isfinite(img).all() and img.mean() > 0
-    for name in ("gx", "gy", "primal_base", "emission_gx", "shift_surface_reconnected", "shift_null"):
-        assert (tmp_path / "b" / f"{name}.npy").exists(), name
+    render_cli(tmp_path, ["scenes/spot-medium.xml", "--integrator", "gbre", "--recon", "l1", "--spp", "4", "--photons", "2000"],
+               16, ("gx", "gy", "primal_base", "emission_gx", "shift_surface_reconnected", "shift_null"))

@@ -13,7 +13,7 @@ import pytest
 from gdlearn.integrators import make
 from gdlearn.integrators.base import render
 from gdlearn.scene.load import load
-from conftest import gradient_residuals
+from conftest import gradient_residuals, render_cli
 
 #: fixed radii for both parts (surface 0.15, volume 0.25) and no reduction (alpha = 1): each pass is
 #: an independent estimate of the blurred full image and the gradients must be unbiased for its
@@ -155,14 +155,5 @@ def test_surface_mis_weights_of_a_pair_sum_to_one(path, min_null):
 def test_cli_full_image_without_transport(tmp_path):
     """``gdlearn render scenes/fog-box.xml --integrator gvpm --recon l1`` (no --transport) renders the
     full image and writes the surface shift counts and the emission gradients."""
-    import subprocess
-    import sys
-    out = tmp_path / "img.npy"
-    p = subprocess.run([sys.executable, "-m", "gdlearn", "render", "scenes/fog-box.xml", "--integrator", "gvpm",
-                        "--recon", "l1", "--set", "res=16", "--spp", "2", "--photons", "2000", "--no-progress",
-                        "--out", str(out), "--buffers", str(tmp_path / "b")], capture_output=True, text=True)
-    assert p.returncode == 0, p.stderr
-    img = np.load(out)
-    assert img.shape == (16, 16, 3) and np.isfinite(img).all() and img.mean() > 0
-    for name in ("gx", "gy", "primal_base", "emission_gx", "shift_surface_reconnected", "shift_null"):
-        assert (tmp_path / "b" / f"{name}.npy").exists(), name
+    render_cli(tmp_path, ["scenes/fog-box.xml", "--integrator", "gvpm", "--recon", "l1", "--spp", "2", "--photons", "2000"],
+               16, ("gx", "gy", "primal_base", "emission_gx", "shift_surface_reconnected", "shift_null"))
