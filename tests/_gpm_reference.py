@@ -3,8 +3,9 @@ a time, its four shifts one after the other, each a call of ``shift_photon`` tha
 base parent, and a buffer write per term): the straightforward reading of Hua et al. 2017, Sec. 4
 and Eq. 11, kept here as the reference the fast kernel must reproduce bit for bit
 (tests/test_gpm_fast.py). The per-photon loops and the shift itself are copied; the camera paths,
-the projection, the parent re-evaluation and the manifold walk are the package's own helpers
-(gpm_light), whose results the rewrite leaves unchanged."""
+the projection and the manifold walk are the package's own helpers (gpm_light), whose results the
+rewrite leaves unchanged; the parent's re-evaluation (gpm_light.parent_factor, since split into a
+base half computed once per photon and an offset half) is copied as it was."""
 import math
 
 import numpy as np
@@ -22,7 +23,13 @@ from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
 from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, GpmOut, _finite3, _put
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, parent_factor, project, same_point
+from gdlearn.integrators.photon.gather import specular_vertex
+from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, project, same_point
+from gdlearn.kernels.bsdf.dispatch import bsdf_pdf
+from gdlearn.kernels.vec import coordinate_system
+from gdlearn.photons.records import K_EMITTER, K_SURFACE
+from gdlearn.photons.trace import _adjoint_weight
+from gdlearn.shifts.photon import emission_profile
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -41,6 +48,50 @@ def reference_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
 def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
     for y in prange(radius.shape[0]):
         out.bad[y] = _gpm_row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
+
+
+@block
+def parent_factor(sa, lp, q, v, d_new):
+    one = (1.0, 1.0, 1.0)
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    d_b, _ = _dir(yq, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
+    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
+    if lp.kind[q] == K_EMITTER:
+        fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
+        fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
+        if not (fb > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
+            return 1, one, 0.0
+        r = fo / fb
+        return 0, (r, r, r), po / pb
+    if lp.kind[q] != K_SURFACE:
+        return 1, one, 0.0
+    if specular_vertex(lp, q):
+        return 2, one, 0.0
+    if not dot(d_b, nq) * dot(d_new, nq) > 0.0:
+        return 1, one, 0.0
+    mat = sa.materials[lp.obj[q]]
+    ns = (lp.nsh[q, 0], lp.nsh[q, 1], lp.nsh[q, 2])
+    s, t = coordinate_system(ns)
+    wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
+    wi = to_local(wi_w, s, t, ns)
+    wb = to_local(d_b, s, t, ns)
+    wo = to_local(d_new, s, t, ns)
+    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
+    fo = _adjoint_weight(mat, bsdf_eval(mat, wi, wo), wi, wo, wi_w, d_new, nq, ns)
+    pb = bsdf_pdf(mat, wi, wb)
+    po = bsdf_pdf(mat, wi, wo)
+    if not (pb > 0.0 and po > 0.0):
+        return 1, one, 0.0
+    for c in range(3):
+        if (fb[c] > 0.0) != (fo[c] > 0.0):
+            return 1, one, 0.0
+    r = (_ratio(fo[0], fb[0]), _ratio(fo[1], fb[1]), _ratio(fo[2], fb[2]))
+    return 0, r, po / pb
+
+
+@block
+def _ratio(a, b):
+    return a / b if b > 0.0 else 0.0
 
 
 @block
