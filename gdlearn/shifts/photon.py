@@ -42,7 +42,7 @@ photon follows it:
 import math
 
 from gdlearn.kernels import vec
-from gdlearn.kernels.jit import block, inlined
+from gdlearn.kernels.jit import inlined
 from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_COS_CUTOFF, EM_TYPE, spot_falloff
 from gdlearn.shifts.path import abs_cos
 
@@ -81,7 +81,7 @@ def projection_jacobian(y_parent, y_star, n_star, y_hit, n_hit):
     return (ca / da) / (cb / db)
 
 
-@block
+@inlined
 def emission_profile(emitters, em, n0, d):
     """(value, pdf) of an emitter vertex y_0 sending light along ``d``: the directional factor of
     Le (cos theta for an area light, one-sided; 1 for a point light; the falloff for a spot) and the
