@@ -20,6 +20,14 @@ shifted to its four neighbours, and every photon it gathers follows by the hybri
    (weight 1, zero offset, counted), which keeps the gradient unbiased and makes it the primal
    finite difference for those photons.
 
+Organisation (for speed; benchmarks/README.md, GPM section): the pixel's nine photon buffers and its
+shift counts are summed in a row scratch term by term in photon order and written once -- the same
+additions in the same order as one write per term, so every buffer is bit for bit that of the
+straightforward kernel (tests/test_gpm_fast.py against tests/_gpm_reference.py); a photon's parent
+is re-evaluated towards the base direction once for its four shifts (``gpm_light.parent_base``),
+each shift evaluating only the offset direction (``parent_offset``); the shift, its projection and
+its reversibility check are inlined into the photon loop.
+
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
 The MIS weight is Eq. 11 in ratio form (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`) in
@@ -257,6 +265,31 @@ def _offset(offs, k):
             (o_wi[k, 0], o_wi[k, 1], o_wi[k, 2]), o_mat[k], (o_beta[k, 0], o_beta[k, 1], o_beta[k, 2]))
 
 
+@inlined
+def _admitted(lp, v, prm, m, state):
+    """Does photon row v complete the gather path (m camera vertices, class state) into a path the
+    pass estimates: within the depth limit, of a wanted class, in the gathered parent subset?"""
+    if lp.depth[v] + m + 1 > prm.max_depth:
+        return False
+    if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
+        return False
+    return parent_ok(lp, v, prm)
+
+
+@inlined
+def _base_term(lp, v, ng, frame, wi, mat, beta):
+    """(ok, c_b): photon v's term at the base gather point, camera weight x f x Phi / |cos_g| (SPPM's
+    density term, gather.density); not ok for a photon arriving grazing the gather point's surface."""
+    ns, s, tt = frame
+    wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
+    cg = abs(dot(wo_w, ng))
+    if not cg > 1e-9:
+        return False, (0.0, 0.0, 0.0)
+    f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
+    return True, (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
+                  beta[2] * f[2] * lp.beta[v, 2] / cg)
+
+
 @block
 def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, stack):
     """The base gather point's photons cand[:n]: their base terms and their four shifts. The nine
@@ -265,7 +298,6 @@ def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, 
     one buffer write per term, so the buffers are those of the straightforward loop bit for bit
     (tests/test_gpm_fast.py), without a call per term."""
     p, ng, frame, wi, mid, beta, state, m = gp
-    ns, s, tt = frame
     mat = sa.materials[mid]
     o_ok = offs[0]
     nbad = 0
@@ -276,20 +308,12 @@ def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, 
             acc[j, c] = out.phi[hh, j, y, x, c]
     for i in range(n):
         v = cand[i]
-        if lp.depth[v] + m + 1 > prm.max_depth:
-            continue
-        if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
-            continue
-        if not parent_ok(lp, v, prm):
+        if not _admitted(lp, v, prm, m, state):
             continue
         cnt += 1
-        wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
-        cg = abs(dot(wo_w, ng))
-        if not cg > 1e-9:
+        ok, c_b = _base_term(lp, v, ng, frame, wi, mat, beta)
+        if not ok:
             continue
-        f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
-        c_b = (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
-               beta[2] * f[2] * lp.beta[v, 2] / cg)
         if not _finite3(c_b):
             nbad += 1
             continue
