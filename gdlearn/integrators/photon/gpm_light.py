@@ -77,9 +77,10 @@ def parent_factor(sa, lp, q, v, d_new):
 
 @inlined
 def parent_base(sa, lp, q, v):
-    """The base side of :func:`parent_factor` for photon row v and its parent row q: (kind P_*, the
-    base direction y_{s-1} -> y_s, the parent's value towards it per channel (emission profile or
-    adjoint BSDF weight), its sampling density p_w(w))."""
+    """The base side of :func:`parent_factor` for photon row v and its parent row q (the reconnection
+    of Hua et al. 2017 Sec. 4.2 Step 2): (kind P_*, the base direction y_{s-1} -> y_s, the parent's
+    value towards it per channel (emission profile, the same in every channel, or adjoint BSDF
+    weight), its sampling density p_w(w)). Independent of the neighbour: once per photon."""
     one = (1.0, 1.0, 1.0)
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     # the base direction from the positions, not the stored ray direction (which left from an origin
@@ -100,12 +101,14 @@ def parent_base(sa, lp, q, v):
     wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
     wi = to_local(wi_w, s, t, ns)
     wb = to_local(d_b, s, t, ns)
-    return P_SURFACE, d_b, _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns), bsdf_pdf(mat, wi, wb)
+    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
+    return P_SURFACE, d_b, fb, bsdf_pdf(mat, wi, wb)
 
 
 @inlined
 def parent_offset(sa, lp, q, base, d_new):
-    """:func:`parent_factor` towards ``d_new`` from its base side ``base`` (:func:`parent_base`)."""
+    """:func:`parent_factor` towards ``d_new`` from its base side ``base`` (:func:`parent_base`):
+    the same arithmetic as evaluating both directions together, so the ratios are the same bits."""
     one = (1.0, 1.0, 1.0)
     kind, d_b, fb, pb = base
     nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
