@@ -16,6 +16,14 @@ the reference's noise floor subtracted from both errors.
 
     .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3
 
+``--kernel``: the camera pass alone, the fast kernel (gpm_gather.gpm_rows) against the one it replaced
+(tests/_gpm_reference.py, kept for tests/test_gpm_fast.py) on the same photons and radii (pass 1 after
+pass 0's radius reduction), interleaved (old, new, old, ...) in one process, ``--repeats`` times; prints
+the median and the minimum of each, their ratio and the load average before and after.
+
+    flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gpm.py --kernel --res 64 --photons 50000 \
+        --scenes scenes/cornell-box.xml,scenes/caustics-box.xml --repeats 5
+
 ``--fig4``: Hua et al. 2017's Fig. 4 -- only the photons whose parent vertex is specular
 (``parent="specular"``: the manifold branch's subset; the emission the camera sees left out), at one
 fixed radius (``--radius-scale`` x the mean pixel footprint, alpha = 1, so every pass estimates the
@@ -67,6 +75,41 @@ def pass_times(path, a) -> None:
           f"gpm/sppm {med['gpm'] / med['sppm']:5.2f}  (gpm: light paths {stage['photons']:.3f} s, build "
           f"{stage['build']:.3f} s, gather {stage['gather']:.3f} s)  photon shifts: reconnected {ok / tot:.1%}, "
           f"failed {fail / tot:.1%}, manifold {mani / tot:.1%}", flush=True)
+
+
+def kernel_times(path, a) -> None:
+    """Old and new camera pass on the same photons and radii, interleaved (module docstring)."""
+    import numpy as np
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+    import _gpm_reference as ref
+    from gdlearn.integrators.photon import gpm_gather as gg
+
+    load0 = os.getloadavg()[0]
+    g = make("gpm", load(path, res=a.res), seed=0, photons_per_pass=a.photons, threads=a.threads)
+    g.compile()
+    g.render_pass(0)
+    lp, grids = g.build(g.trace_photons(1))
+    radius = np.sqrt(g.r2)
+    kernels = {"old": ref.reference_rows, "new": gg.gpm_rows}
+    times = {n: [] for n in kernels}
+    outs = {}
+    for i in range(a.repeats + 1):
+        for n, rows in kernels.items():
+            out = gg.allocate(g.height, g.width)
+            t0 = time.perf_counter()
+            with g.setup.parallel(g.height):
+                rows(g.setup.sa, lp, grids, g.mtab, g.gather_params, g.seed, 2, radius, out)
+            if i > 0:                       # the first round compiles the reference kernel
+                times[n].append(time.perf_counter() - t0)
+            outs[n] = out
+    same = all(np.array_equal(x, y) for x, y in zip(outs["old"], outs["new"]))
+    med = {n: statistics.median(v) for n, v in times.items()}
+    c = outs["new"].count.sum(axis=(0, 2, 3))
+    print(f"{os.path.basename(path):22s} kernel old {med['old']:6.3f} s (min {min(times['old']):.3f})  new "
+          f"{med['new']:6.3f} s (min {min(times['new']):.3f})  old/new {med['old'] / med['new']:5.2f}  "
+          f"array-equal {same}  shifts {int(c.sum())} (manifold {int(c[gg.MANIFOLD])})  load average "
+          f"{load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
 
 
 def equal_time_study(a) -> int:
@@ -165,6 +208,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--ref-spp", type=int, default=16384)
     ap.add_argument("--methods", default="sppm,gpm,gpm+l1,gpm+l2,pt", help="of --equal-time; sppm first (the ratios' base)")
+    ap.add_argument("--kernel", action="store_true", help="old vs new camera pass alone (module docstring)")
     ap.add_argument("--fig4", action="store_true", help="Hua et al. 2017 Fig. 4 (module docstring)")
     ap.add_argument("--passes", type=int, default=32, help="of --fig4, per seed")
     ap.add_argument("--ref-passes", type=int, default=400, help="of --fig4's sppm reference")
@@ -172,6 +216,12 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.fig4:
         return fig4_study(a)
+    if a.kernel:
+        print(f"camera pass alone, {a.res}x{a.res}, {a.photons} light paths, {a.threads} threads, median of "
+              f"{a.repeats}, old and new interleaved")
+        for path in a.scenes.split(","):
+            kernel_times(path, a)
+        return 0
     if a.equal_time is not None:
         return equal_time_study(a)
     print(f"{a.res}x{a.res}, {a.photons} light paths a pass, {a.threads} threads, median of {a.repeats} passes after "

@@ -40,7 +40,7 @@ import numpy as np
 
 from gdlearn.kernels import vec
 from gdlearn.shifts.halfvector import half_vector
-from gdlearn.kernels.jit import block, ir_inline
+from gdlearn.kernels.jit import block, inlined, ir_inline
 
 # --- shape rows ---------------------------------------------------------------------------------
 SHAPE_PLANE = 0
@@ -92,7 +92,7 @@ def _v3(a, i, c):
     return (a[i, c], a[i, c + 1], a[i, c + 2])
 
 
-@block
+@inlined
 def shape_frame(shapes, j, x):
     """(s, t, n) local frame of chain vertex j at x."""
     if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
@@ -102,7 +102,7 @@ def shape_frame(shapes, j, x):
     return s, t, n
 
 
-@block
+@inlined
 def shape_chart(shapes, j, x, u, v):
     """Move x on its surface by (u, v) in the tangent frame (derivative at 0 is orthonormal)."""
     s, t, n = shape_frame(shapes, j, x)
@@ -113,7 +113,7 @@ def shape_chart(shapes, j, x, u, v):
     return vec.add(c, vec.scale(vec.normalize(vec.sub(y, c)), shapes[j, SH_R]))
 
 
-@block
+@inlined
 def shape_contains(shapes, j, x):
     if int(shapes[j, SH_TYPE]) != SHAPE_PLANE:
         return True
@@ -122,7 +122,7 @@ def shape_contains(shapes, j, x):
             and abs(vec.dot(d, _v3(shapes, j, SH_V))) <= shapes[j, SH_EXT + 1])
 
 
-@block
+@inlined
 def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (wrong side,
     degenerate half vector, vertex off its surface)."""
@@ -148,7 +148,7 @@ def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
     return True
 
 
-@block
+@inlined
 def _max_abs(a, m):
     r = 0.0
     for i in range(m):
@@ -238,14 +238,14 @@ def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, 
     return True
 
 
-@block
+@inlined
 def _moved(X, dX, lam, shapes, k, Xn):
     for j in range(k):
         p = shape_chart(shapes, j, _v3(X, j, 0), lam * dX[2 * j, 0], lam * dX[2 * j + 1, 0])
         Xn[j, 0], Xn[j, 1], Xn[j, 2] = p[0], p[1], p[2]
 
 
-@block
+@inlined
 def _norm2(a, m):
     s = 0.0
     for i in range(m):

@@ -42,12 +42,12 @@ photon follows it:
 import math
 
 from gdlearn.kernels import vec
-from gdlearn.kernels.jit import block
+from gdlearn.kernels.jit import inlined
 from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_COS_CUTOFF, EM_TYPE, spot_falloff
 from gdlearn.shifts.path import abs_cos
 
 
-@block
+@inlined
 def rotate(v, frame, frame_o):
     """``M' M^-1 v``: a vector carried from the frame ``(n, s, t)`` at z to the one at z' (Eq. 5's
     rotation; the photon's normal goes with it to y*)."""
@@ -56,14 +56,14 @@ def rotate(v, frame, frame_o):
     return vec.to_world(vec.to_local(v, s, t, n), so, to, no)
 
 
-@block
+@inlined
 def offset_target(y, z, frame, z_o, frame_o):
     """Eq. 5: ``y* = z' + M' M^-1 (y - z)`` with frames ``(n, s, t)`` at z and z' (world vectors)."""
     w = rotate((y[0] - z[0], y[1] - z[1], y[2] - z[2]), frame, frame_o)
     return (z_o[0] + w[0], z_o[1] + w[1], z_o[2] + w[2])
 
 
-@block
+@inlined
 def projection_jacobian(y_parent, y_star, n_star, y_hit, n_hit):
     """Eq. 6: ``|dy'/dy| = (|cos*| / d*^2) / (|cos'| / d'^2)`` for the projection of y* onto y' along
     the ray from ``y_parent`` (cosines with n_star at y*, n_hit at y'). 0 if a segment is degenerate
@@ -81,7 +81,7 @@ def projection_jacobian(y_parent, y_star, n_star, y_hit, n_hit):
     return (ca / da) / (cb / db)
 
 
-@block
+@inlined
 def emission_profile(emitters, em, n0, d):
     """(value, pdf) of an emitter vertex y_0 sending light along ``d``: the directional factor of
     Le (cos theta for an area light, one-sided; 1 for a point light; the falloff for a spot) and the
@@ -104,7 +104,7 @@ def emission_profile(emitters, em, n0, d):
     return 0.0, 0.0
 
 
-@block
+@inlined
 def photon_geometry_ratio(y_parent, y_base, n_base, y_star, n_star):
     """``(|cos*| / d*^2) / (|cos_s| / d^2)``: the factor the offset photon's power and the light side
     of the MIS ratio share (module docstring); 0 if degenerate. It is Eq. 6's ratio with the roles

@@ -168,14 +168,14 @@ def direct(sa, p, ng, frame, wi, mat, h, stack):
     return (f[0] * w_em[0], f[1] * w_em[1], f[2] * w_em[2])
 
 
-@block
+@inlined
 def specular_vertex(lp, q):
     """Did surface row ``q`` leave by a specular lobe (delta, or a microfacet below the roughness
     threshold)? Such a parent is what sends GPM's shift to the manifold branch."""
     return (lp.flags[q] & F_DELTA_OUT) != 0 or not (lp.lobe[q] == L.V_DIFFUSE or lp.lobe[q] == L.V_GLOSSY)
 
 
-@block
+@inlined
 def parent_ok(lp, v, prm):
     """Is photon row ``v`` in the gathered subset ``prm.parents``: every photon (0), only one whose
     parent y_{s-1} is a specular surface vertex (1: the subset of Hua et al. 2017's Fig. 4, the

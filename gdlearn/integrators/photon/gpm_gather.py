@@ -20,6 +20,14 @@ shifted to its four neighbours, and every photon it gathers follows by the hybri
    (weight 1, zero offset, counted), which keeps the gradient unbiased and makes it the primal
    finite difference for those photons.
 
+Organisation (for speed; benchmarks/README.md, GPM section): the pixel's nine photon buffers and its
+shift counts are summed in a row scratch term by term in photon order and written once -- the same
+additions in the same order as one write per term, so every buffer is bit for bit that of the
+straightforward kernel (tests/test_gpm_fast.py against tests/_gpm_reference.py); a photon's parent
+is re-evaluated towards the base direction once for its four shifts (``gpm_light.parent_base``),
+each shift evaluating only the offset direction (``parent_offset``); the shift, its projection and
+its reversibility check are inlined into the photon loop.
+
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
 The MIS weight is Eq. 11 in ratio form (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`) in
@@ -43,14 +51,15 @@ from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.jit import block, inlined, rows
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, parent_factor, project, same_point
+from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, manifold_photon, parent_base, parent_offset, project, \
+    same_point
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 
@@ -77,12 +86,21 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     """The hybrid shift's light half for photon row ``v`` gathered at ``base`` = (p, frame) and
     moved to the offset gather point ``off`` = (p', ng', frame', wi', mat'). Returns (status,
     photon term at the offset (before the camera weight), MIS density ratio offset / base)."""
+    q = lp.parent[v]
+    if q < 0:
+        return FAILED, (0.0, 0.0, 0.0), 0.0
+    return _shift(sa, lp, mtab, prm, v, q, parent_base(sa, lp, q, v), base, off, r, stack)
+
+
+@inlined
+def _shift(sa, lp, mtab, prm, v, q, pbase, base, off, r, stack):
+    """:func:`shift_photon` for a photon with a parent (row q >= 0) whose base side ``pbase``
+    (:func:`gpm_light.parent_base`) is already known: the camera pass computes it once per photon
+    for the four neighbours. Inlined into the photon loop: a call passing the scene, the light
+    records and the two gather points as tuples costs about as much as the shift's arithmetic."""
     zero = (0.0, 0.0, 0.0)
     p, frame = base
     p2, ng2, frame2, wi2, mat2 = off
-    q = lp.parent[v]
-    if q < 0:
-        return FAILED, zero, 0.0
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     ystar = offset_target(ys, p, frame, p2, frame2)                        # Eq. 5
@@ -94,13 +112,13 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     d, dl = _dir(yq, ystar)
     if not dl > 0.0:
         return FAILED, zero, 0.0
-    status, fr, pr = parent_factor(sa, lp, q, v, d)
+    status, fr, pr = parent_offset(sa, lp, q, pbase, d)
     if status == 2:                                                        # a specular parent
         ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
         return _at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
     if status != 0:
         return FAILED, zero, 0.0
-    ok, _, yh, _ = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)
+    ok, _, yh, _ = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)   # Eq. 6
     if not (ok and _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack)):
         return FAILED, zero, 0.0
     geo = photon_geometry_ratio(yq, ys, nv, ystar, nstar)
@@ -109,7 +127,7 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     return _at_offset(RECONNECTED, lp, v, (fr[0] * geo, fr[1] * geo, fr[2] * geo), pr * geo, d, off)
 
 
-@block
+@inlined
 def _at_offset(status, lp, v, ratio3, ratio, w_arr, off):
     """(status, term, ratio): the offset photon, of power beta_v x ratio3 arriving along w_arr, as
     the offset gather point sees it (the base estimate's f Phi / |cos_g|, gather.density)."""
@@ -127,7 +145,7 @@ def _at_offset(status, lp, v, ratio3, ratio, w_arr, off):
                     f[2] * lp.beta[v, 2] * ratio3[2] / cg), ratio
 
 
-@block
+@inlined
 def _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack):
     """Does the inverse shift take the offset photon y'_s back to y_s (Hua et al. 2017 Sec. 4.3)?
     When the projection did not move y* (y'_s = y*_s, a photon on a plane the shift slides along)
@@ -161,7 +179,8 @@ def _borrow_out(o):
 
 @rows
 def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
-    for y in prange(radius.shape[0]):
+    for row in prange(radius.shape[0]):
+        y = np.int64(row)           # one specialisation of _gpm_row (kernels/jit.py: prange's index type)
         out.bad[y] = _gpm_row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
 
 
@@ -171,7 +190,7 @@ def _put(buf, hh, i, y, x, v, scale):
         buf[hh, i, y, x, c] += scale * v[c]
 
 
-@block
+@inlined
 def _finite3(v):
     return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
 
@@ -191,6 +210,7 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     o_wi = np.zeros((4, 3))
     o_mat = np.zeros(4, dtype=np.int64)
     o_beta = np.zeros((4, 3))
+    acc = np.empty((9, 3))          # the pixel's nine buffers while its photons are summed (_shift_photons)
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -233,11 +253,11 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
-                                   (o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta), stack)
+                                   (o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta), acc, stack)
     return nbad
 
 
-@block
+@inlined
 def _offset(offs, k):
     o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta = offs
     fr = ((o_fr[k, 0, 0], o_fr[k, 0, 1], o_fr[k, 0, 2]), (o_fr[k, 1, 0], o_fr[k, 1, 1], o_fr[k, 1, 2]),
@@ -246,58 +266,91 @@ def _offset(offs, k):
             (o_wi[k, 0], o_wi[k, 1], o_wi[k, 2]), o_mat[k], (o_beta[k, 0], o_beta[k, 1], o_beta[k, 2]))
 
 
-@block
-def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
-    """The base gather point's photons cand[:n]: their base terms and their four shifts."""
-    p, ng, frame, wi, mid, beta, state, m = gp
+@inlined
+def _admitted(lp, v, prm, m, state):
+    """Does photon row v complete the gather path (m camera vertices, class state) into a path the
+    pass estimates: within the depth limit, of a wanted class, in the gathered parent subset?"""
+    if lp.depth[v] + m + 1 > prm.max_depth:
+        return False
+    if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
+        return False
+    return parent_ok(lp, v, prm)
+
+
+@inlined
+def _base_term(lp, v, ng, frame, wi, mat, beta):
+    """(ok, c_b): photon v's term at the base gather point, camera weight x f x Phi / |cos_g| (SPPM's
+    density term, gather.density); not ok for a photon arriving grazing the gather point's surface."""
     ns, s, tt = frame
+    wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
+    cg = abs(dot(wo_w, ng))
+    if not cg > 1e-9:
+        return False, (0.0, 0.0, 0.0)
+    f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
+    return True, (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
+                  beta[2] * f[2] * lp.beta[v, 2] / cg)
+
+
+@block
+def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, stack):
+    """The base gather point's photons cand[:n]: their base terms and their four shifts. The nine
+    buffers of the pixel (L, D_k, S_k) are summed in ``acc`` and the shift counts in integers, term
+    by term in photon order and written once at the end: the same additions in the same order as
+    one buffer write per term, so the buffers are those of the straightforward loop bit for bit
+    (tests/test_gpm_fast.py), without a call per term."""
+    p, ng, frame, wi, mid, beta, state, m = gp
     mat = sa.materials[mid]
     o_ok = offs[0]
     nbad = 0
     cnt = 0
+    counts = np.zeros(3, dtype=np.int64)
+    for j in range(9):
+        for c in range(3):
+            acc[j, c] = out.phi[hh, j, y, x, c]
     for i in range(n):
         v = cand[i]
-        if lp.depth[v] + m + 1 > prm.max_depth:
-            continue
-        if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
-            continue
-        if not parent_ok(lp, v, prm):
+        if not _admitted(lp, v, prm, m, state):
             continue
         cnt += 1
-        wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
-        cg = abs(dot(wo_w, ng))
-        if not cg > 1e-9:
+        ok, c_b = _base_term(lp, v, ng, frame, wi, mat, beta)
+        if not ok:
             continue
-        f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
-        c_b = (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
-               beta[2] * f[2] * lp.beta[v, 2] / cg)
         if not _finite3(c_b):
             nbad += 1
             continue
-        _put(out.phi, hh, 0, y, x, c_b, 1.0)
+        for c in range(3):
+            acc[0, c] += c_b[c]
+        q = lp.parent[v]
+        # the parent's base side (Eq. 6's reconnection, or the manifold branch), once for all four
+        pbase = parent_base(sa, lp, q, v) if q >= 0 else (P_FAIL, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 0.0)
         for k in range(4):
             status = FAILED
-            term = (0.0, 0.0, 0.0)
-            ratio = 0.0
-            beta2 = (0.0, 0.0, 0.0)
             c_o = (0.0, 0.0, 0.0)
-            if o_ok[k]:
+            ratio = 0.0
+            if o_ok[k] and q >= 0:
                 p2, ng2, fr2, wi2, mid2, beta2 = _offset(offs, k)
-                status, term, ratio = shift_photon(sa, lp, mtab, prm, v, (p, frame), (p2, ng2, fr2, wi2, sa.materials[mid2]),
-                                                   r, stack)
-            if status != FAILED:
-                c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
-                if not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
-                    status = FAILED
-            out.count[hh, status, y, x] += 1
+                status, term, ratio = _shift(sa, lp, mtab, prm, v, q, pbase, (p, frame),
+                                             (p2, ng2, fr2, wi2, sa.materials[mid2]), r, stack)
+                if status != FAILED:
+                    c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
+                    if not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
+                        status = FAILED
+            counts[status] += 1
             if status == FAILED:
-                _put(out.phi, hh, 1 + k, y, x, c_b, -1.0)           # w = 1, no offset (Hua et al. Sec. 4.3)
+                for c in range(3):
+                    acc[1 + k, c] += -1.0 * c_b[c]                  # w = 1, no offset (Hua et al. Sec. 4.3)
                 continue
             # Eq. 11, 1 / (1 + p'|J| / p), in both branches: a pair's two weights sum to 1 within
             # 1e-9 (reconnection, tests/test_gpm.py) and 1e-4 (the walk's determinants are central
             # differences; every manifold pair of a render pass, tests/test_gpm_manifold.py)
             wgt = mis_weight_from_log_ratio(math.log(ratio))
-            _put(out.phi, hh, 1 + k, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
-            _put(out.phi, hh, 5 + k, y, x, c_o, wgt)
+            for c in range(3):
+                acc[1 + k, c] += wgt * (c_o[c] - c_b[c])
+                acc[5 + k, c] += wgt * c_o[c]
+    for j in range(9):
+        for c in range(3):
+            out.phi[hh, j, y, x, c] = acc[j, c]
+    for st in range(3):
+        out.count[hh, st, y, x] += counts[st]
     out.m[hh, y, x] = cnt
     return nbad

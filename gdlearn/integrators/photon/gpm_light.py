@@ -38,7 +38,7 @@ from gdlearn.kernels import layout as L
 from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_is_delta_only, bsdf_pdf, vertex_class
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from gdlearn.kernels.jit import block
+from gdlearn.kernels.jit import block, inlined
 from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.photons.trace import _adjoint_weight
@@ -53,7 +53,7 @@ from gdlearn.shifts.policy import MAX_CHAIN
 
 
 
-@block
+@inlined
 def _dir(a, b):
     d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
     n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -62,11 +62,25 @@ def _dir(a, b):
     return (d[0] / n, d[1] / n, d[2] / n), n
 
 
+#: parent_base's kinds: how the parent y_{s-1} is re-evaluated towards a new direction
+P_FAIL, P_EMITTER, P_SURFACE, P_SPECULAR = 0, 1, 2, 3
+
+
 @block
 def parent_factor(sa, lp, q, v, d_new):
     """The parent y_{s-1} = row q re-evaluated towards ``d_new`` (reconnection): returns (status,
     (f'/f per channel), p_w(w') / p_w(w)). status 0: ok, 1: fails, 2: needs the manifold walk (a
-    specular parent)."""
+    specular parent). The base half (:func:`parent_base`) does not depend on d_new: the camera pass
+    computes it once per photon for its four neighbours and calls :func:`parent_offset` per shift."""
+    return parent_offset(sa, lp, q, parent_base(sa, lp, q, v), d_new)
+
+
+@inlined
+def parent_base(sa, lp, q, v):
+    """The base side of :func:`parent_factor` for photon row v and its parent row q (the reconnection
+    of Hua et al. 2017 Sec. 4.2 Step 2): (kind P_*, the base direction y_{s-1} -> y_s, the parent's
+    value towards it per channel (emission profile, the same in every channel, or adjoint BSDF
+    weight), its sampling density p_w(w)). Independent of the neighbour: once per photon."""
     one = (1.0, 1.0, 1.0)
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     # the base direction from the positions, not the stored ray direction (which left from an origin
@@ -76,15 +90,38 @@ def parent_factor(sa, lp, q, v, d_new):
     nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
     if lp.kind[q] == K_EMITTER:
         fb, pb = emission_profile(sa.emitters, lp.obj[q], nq, d_b)
-        fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
-        if not (fb > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
-            return 1, one, 0.0
-        r = fo / fb
-        return 0, (r, r, r), po / pb
+        return P_EMITTER, d_b, (fb, fb, fb), pb
     if lp.kind[q] != K_SURFACE:
-        return 1, one, 0.0
+        return P_FAIL, d_b, one, 0.0
     if specular_vertex(lp, q):
+        return P_SPECULAR, d_b, one, 0.0
+    mat = sa.materials[lp.obj[q]]
+    ns = (lp.nsh[q, 0], lp.nsh[q, 1], lp.nsh[q, 2])
+    s, t = coordinate_system(ns)
+    wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
+    wi = to_local(wi_w, s, t, ns)
+    wb = to_local(d_b, s, t, ns)
+    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
+    return P_SURFACE, d_b, fb, bsdf_pdf(mat, wi, wb)
+
+
+@inlined
+def parent_offset(sa, lp, q, base, d_new):
+    """:func:`parent_factor` towards ``d_new`` from its base side ``base`` (:func:`parent_base`):
+    the same arithmetic as evaluating both directions together, so the ratios are the same bits."""
+    one = (1.0, 1.0, 1.0)
+    kind, d_b, fb, pb = base
+    nq = (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2])
+    if kind == P_EMITTER:
+        fo, po = emission_profile(sa.emitters, lp.obj[q], nq, d_new)
+        if not (fb[0] > 0.0 and fo > 0.0 and pb > 0.0 and po > 0.0):
+            return 1, one, 0.0
+        r = fo / fb[0]
+        return 0, (r, r, r), po / pb
+    if kind == P_SPECULAR:
         return 2, one, 0.0
+    if kind != P_SURFACE:
+        return 1, one, 0.0
     if not dot(d_b, nq) * dot(d_new, nq) > 0.0:            # the offset must leave on the base's side
         return 1, one, 0.0
     mat = sa.materials[lp.obj[q]]
@@ -92,11 +129,8 @@ def parent_factor(sa, lp, q, v, d_new):
     s, t = coordinate_system(ns)
     wi_w = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])
     wi = to_local(wi_w, s, t, ns)
-    wb = to_local(d_b, s, t, ns)
     wo = to_local(d_new, s, t, ns)
-    fb = _adjoint_weight(mat, bsdf_eval(mat, wi, wb), wi, wb, wi_w, d_b, nq, ns)
     fo = _adjoint_weight(mat, bsdf_eval(mat, wi, wo), wi, wo, wi_w, d_new, nq, ns)
-    pb = bsdf_pdf(mat, wi, wb)
     po = bsdf_pdf(mat, wi, wo)
     if not (pb > 0.0 and po > 0.0):
         return 1, one, 0.0
@@ -107,7 +141,7 @@ def parent_factor(sa, lp, q, v, d_new):
     return 0, r, po / pb
 
 
-@block
+@inlined
 def _ratio(a, b):
     return a / b if b > 0.0 else 0.0
 
@@ -140,7 +174,7 @@ def chain_rows(sa, lp, mtab, q, rows):
 SAME_POINT = 1e-6
 
 
-@block
+@inlined
 def same_point(a, b, yq, r):
     """Do two hits of rays from the light vertex yq count as one point? Within a millionth of the
     kernel radius r plus 100 x the push of a spawned ray's origin (geometry.offset_origin: the ray
@@ -169,7 +203,7 @@ def reaches(sa, a, ng_a, b, r, stack):
     return True, prim, ng, ns
 
 
-@block
+@inlined
 def project(sa, prm, yq, nq, ystar, p2, r, stack):
     """Eq. 6's projection: the first surface the ray from the light vertex yq (normal nq) through y*
     hits, which must hold a photon (not specular) and lie in the offset gather point p2's kernel of
