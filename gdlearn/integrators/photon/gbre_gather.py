@@ -61,7 +61,7 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED,
 from gdlearn.integrators.photon.gpm_gather import _finite3, _put
 from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_path
 from gdlearn.integrators.photon.gvpm_light import OK, reconnect
-from gdlearn.integrators.photon.volume_estimates import D_CHORD, KERNEL_2D, _admit, ball_volume, biweight
+from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 from gdlearn.shifts.volume_photon import NULL, REFLECTED, TRANSLATED, camera_distance_copy, chord_half, \
@@ -201,19 +201,9 @@ def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, buf, stack, out, hh, y, x)
         if not _admit(lp, v, prm, med, m, state):
             continue
         tp, dp2 = bbh_mod.perp(o, d, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
-        if gp.kernel == KERNEL_2D:
-            if not (dp2 < r * r and 0.0 < tp < s):
-                continue
-            t = tp
-            kw = biweight(dp2 / (r * r)) / (r * r)
-        else:
-            if not dp2 < r * r:
-                continue
-            half = math.sqrt(r * r - dp2)
-            t = tp + (2.0 * rand_at(h, D_CHORD + (b << 32) + v) - 1.0) * half
-            if not (0.0 < t < s):
-                continue
-            kw = 2.0 * half / ball_volume(r)          # / the base chord density 1 / (2 half)
+        ok, t, kw = beam_kernel(gp.kernel, r, s, tp, dp2, h, b, v)     # the BRE's own kernel and chord point
+        if not ok:
+            continue
         cnt += 1
         tr = transmittance(sig, t)
         ph = hg_eval(g, d[0] * lp.d_in[v, 0] + d[1] * lp.d_in[v, 1] + d[2] * lp.d_in[v, 2]) * kw

@@ -223,6 +223,27 @@ def vpm_beam(media, lp, grid, prm, h, beams, bstate, nb, r, K, knn, kd, kv, buf)
     return a, cnt
 
 
+@inlined
+def beam_kernel(kernel, r, s, tp, dp2, h, b, v):
+    """The BRE's kernel for photon row v at distance ``tp`` along camera beam b (length s, random
+    stream h) and squared distance ``dp2`` from it: ``(ok, t, kw)``, t the point on the beam the
+    photon scatters towards and kw its kernel weight. 2D: Jarosz et al. 2008's biweight disc facing
+    the ray, t = tp. 3D: a ball of radius r, t uniform on the chord the beam cuts through it (the
+    random number keyed by (beam, photon), so a gradient estimator's base sees the same t), kw the
+    ball's kernel over the chord density 1 / (2 half). ok is False outside the kernel or the beam."""
+    if kernel == KERNEL_2D:
+        if not (dp2 < r * r and 0.0 < tp < s):
+            return False, 0.0, 0.0
+        return True, tp, biweight(dp2 / (r * r)) / (r * r)
+    if not dp2 < r * r:
+        return False, 0.0, 0.0
+    half = math.sqrt(r * r - dp2)
+    t = tp + (2.0 * rand_at(h, D_CHORD + (b << 32) + v) - 1.0) * half
+    if not (0.0 < t < s):
+        return False, 0.0, 0.0
+    return True, t, 2.0 * half / ball_volume(r)
+
+
 @block
 def bre_beam(media, lp, bbh, radius, prm, h, beams, bstate, b, kernel, buf):
     """The beam radiance estimate along beam b (module docstring): (camera weight x sum of photon
@@ -255,19 +276,9 @@ def bre_beam(media, lp, bbh, radius, prm, h, beams, bstate, b, kernel, buf):
         qy -= tp * d[1]
         qz -= tp * d[2]
         dp2 = qx * qx + qy * qy + qz * qz
-        if kernel == 2:
-            if not (dp2 < r * r and 0.0 < tp < s):
-                continue
-            t = tp
-            kw = biweight(dp2 / (r * r)) / (r * r)
-        else:
-            if not dp2 < r * r:
-                continue
-            half = math.sqrt(r * r - dp2)
-            t = tp + (2.0 * rand_at(h, D_CHORD + (b << 32) + v) - 1.0) * half
-            if not (0.0 < t < s):
-                continue
-            kw = 2.0 * half / ball_volume(r)
+        ok, t, kw = beam_kernel(kernel, r, s, tp, dp2, h, b, v)
+        if not ok:
+            continue
         cnt += 1
         tr = transmittance(sig, t)
         ph = hg_eval(g, dot((d[0], d[1], d[2]), (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]))) * kw
