@@ -72,4 +72,17 @@ def mis_primal(out: np.ndarray) -> np.ndarray:
     return 0.25 * acc
 
 
-__all__ = ["combine_gradients", "mis_primal"]
+def pass_halves(buffers: np.ndarray, names) -> dict:
+    """The images of a photon pass's two halves: for each half of ``buffers`` (2, 9, H, W, 3: L, D_k,
+    S_k with the MIS weights inside, PHOTONS.md Sec. 0.2) the MIS primal, the base L, gx and gy,
+    under ``names`` (four names, None for an image not kept), as lists of the two halves' images."""
+    out = {n: [] for n in names if n}
+    for b in buffers:
+        gx, gy = combine_gradients(b[1:5], (1.0, 1.0))
+        for name, img in zip(names, (mis_primal(b), b[0], gx, gy)):
+            if name:
+                out[name].append(img)
+    return out
+
+
+__all__ = ["combine_gradients", "mis_primal", "pass_halves"]

@@ -45,7 +45,7 @@ import time
 import numpy as np
 
 from gdlearn.integrators.base import PassResult
-from gdlearn.integrators.gradients import combine_gradients, mis_primal
+from gdlearn.integrators.gradients import pass_halves
 from gdlearn.integrators.photon import gbre_gather as gb
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
@@ -71,18 +71,6 @@ def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
                 count = (hi - g + 1) // 2 - (lo - g + 1) // 2       # i in [lo, hi) with i = g mod 2
                 w[hh, g] = n_half / count if count > 0 else 0.0
     return w
-
-
-def _halves(buf, names) -> dict:
-    """Per half of ``buf`` (2, 9, H, W, 3: L, D_k, S_k with the MIS weights inside), the MIS primal,
-    the base and the two gradients under ``names`` (None: not kept)."""
-    out = {n: [] for n in names if n}
-    for b in buf:
-        gx, gy = combine_gradients(b[1:5], (1.0, 1.0))
-        for name, img in zip(names, (mis_primal(b), b[0], gx, gy)):
-            if name:
-                out[name].append(img)
-    return out
 
 
 class GBRE(BRE):
@@ -162,10 +150,10 @@ class GBRE(BRE):
         est = out.phi / self.n_half                           # (2, 9, H, W, 3): the kernel is inside
         if self.vparams.surfaces:
             dens, le, sout = self._surface(lp, sgrids, pass_index)
-            halves = {**_halves(est + dens + le, ("primal", "primal_base", "gx", "gy")),
-                      **_halves(le, ("emission", None, "emission_gx", "emission_gy"))}
+            halves = {**pass_halves(est + dens + le, ("primal", "primal_base", "gx", "gy")),
+                      **pass_halves(le, ("emission", None, "emission_gx", "emission_gy"))}
         else:
-            halves = _halves(est, ("primal", "primal_base", "gx", "gy"))
+            halves = pass_halves(est, ("primal", "primal_base", "gx", "gy"))
         for i, name in enumerate(COUNTS):
             halves[f"shift_{name}"] = [out.count[0, i], out.count[1, i]]
         if self.vparams.surfaces:

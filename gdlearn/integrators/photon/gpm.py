@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from gdlearn.integrators.base import PassResult
-from gdlearn.integrators.gradients import combine_gradients, mis_primal
+from gdlearn.integrators.gradients import pass_halves
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, allocate, gpm_rows
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, SurfacePhotonMapper, accumulate_density, reduce_radius
@@ -92,13 +92,9 @@ class GPM(SurfacePhotonMapper):
         self.counts += out.count.sum(axis=0)
         self._m = out.m.sum(axis=0)
         k = pass_index + 1
-        halves = {name: [] for name in ("primal", "primal_base", "gx", "gy", "emission", "emission_gx", "emission_gy")}
-        for dens, emis in zip(self.D / (self.n_half * k), self.E / k):        # per half: (9, H, W, 3)
-            for names, b in ((("primal", "gx", "gy"), dens + emis), (("emission", "emission_gx", "emission_gy"), emis)):
-                gx, gy = combine_gradients(b[1:5], (1.0, 1.0))   # MIS weights are inside the buffers
-                for name, img in zip(names, (mis_primal(b), gx, gy)):
-                    halves[name].append(img)
-            halves["primal_base"].append(dens[0] + emis[0])
+        emis = self.E / k
+        halves = {**pass_halves(self.D / (self.n_half * k) + emis, ("primal", "primal_base", "gx", "gy")),
+                  **pass_halves(emis, ("emission", None, "emission_gx", "emission_gy"))}
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         images["shift_reconnected"] = self.counts[RECONNECTED].copy()
         images["shift_failed"] = self.counts[FAILED].copy()

@@ -45,7 +45,7 @@ import math
 import numpy as np
 
 from gdlearn.integrators.base import PassResult
-from gdlearn.integrators.gradients import combine_gradients, mis_primal
+from gdlearn.integrators.gradients import pass_halves
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
@@ -136,16 +136,9 @@ class GVPM(VPM):
         k = pass_index + 1
         # as VPM's frame: (surface + medium densities) / light paths + emission, per half
         est = (self.D + self.Dv) / (self.n_half * k) + self.E / k
-        names = ("primal", "primal_base", "gx", "gy", "emission", "emission_gx", "emission_gy")
-        halves = {name: [] for name in names}
-        for b, e in zip(est, self.E / k):                # per half: (9, H, W, 3)
-            for part, buf in ((("primal", "gx", "gy"), b), (("emission", "emission_gx", "emission_gy"), e)):
-                gx, gy = combine_gradients(buf[1:5], (1.0, 1.0))   # the MIS weights are inside the buffers
-                for name, img in zip(part, (mis_primal(buf), gx, gy)):
-                    halves[name].append(img)
-            halves["primal_base"].append(b[0])
-        if not self.vparams.surfaces:
-            halves = {n: v for n, v in halves.items() if not n.startswith("emission")}
+        halves = pass_halves(est, ("primal", "primal_base", "gx", "gy"))
+        if self.vparams.surfaces:
+            halves.update(pass_halves(self.E / k, ("emission", None, "emission_gx", "emission_gy")))
         images = {name: 0.5 * (a + b) for name, (a, b) in halves.items()}
         for i, name in enumerate(_MEDIUM_COUNTS):
             images[f"shift_{name}"] = self.counts[i].copy()
