@@ -10,7 +10,7 @@ functions (:func:`make_shift_photons`):
   per photon for its four shifts;
 * ``shift(sa, lp, mtab, prm, v, state, base, off, r, stack) -> (status, term, ratio)``: the shift to
   one offset gather point ``off`` = (p', ng', frame', wi', mat') from ``base`` = (p, frame): the
-  outcome (:data:`RECONNECTED`, :data:`FAILED`, :data:`MANIFOLD`), the photon term at the offset
+  outcome (``RECONNECTED``, ``FAILED``, ``MANIFOLD``), the photon term at the offset
   before the camera weight (f Phi / ``|cos_g|``, :func:`at_offset`), and the MIS density ratio
   p'/p of the light side (the camera side, a replayed path, contributes 1).
 
@@ -18,7 +18,7 @@ The loop sums the pixel's nine buffers (L, D_k, S_k; :mod:`gdlearn.integrators.g
 scratch term by term in photon order and writes them once, and counts the shifts in integers: the
 same additions in the same order as a buffer write per term, so the buffers are those of the
 straightforward loop bit for bit (tests/test_gpm_fast.py, tests/test_gvol_surface_fast.py) without
-a call per term. The MIS weight is Eq. 11 in ratio form, 1 / (1 + p'``|J|``/p)
+a call per term. The MIS weight is Eq. 11 in ratio form, 1 / (1 + r) with r = p' ``|J|`` / p
 (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`); a failed shift has weight 1 and no offset
 (Hua et al. 2017, Sec. 4.3).
 
