@@ -22,7 +22,8 @@ from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
-from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, GpmOut, _finite3, _put
+from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, GpmOut
+from gdlearn.integrators.photon.photon_shift_loop import finite3 as _finite3, put as _put
 from gdlearn.integrators.photon.gather import specular_vertex
 from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, project, same_point
 from gdlearn.kernels.bsdf.dispatch import bsdf_pdf

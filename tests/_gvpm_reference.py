@@ -20,7 +20,7 @@ from gdlearn.photons.grid import query as grid_query
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_S, BEAM_W, MAX_BEAMS, beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
-from gdlearn.integrators.photon.gpm_gather import _finite3, _put
+from gdlearn.integrators.photon.photon_shift_loop import finite3 as _finite3, put as _put
 from gdlearn.integrators.photon.gpm_light import _dir
 from gdlearn.integrators.photon.gvpm_gather import (C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_gather,
                                                     _offset_path, _point)

@@ -133,15 +133,13 @@ def test_surface_mis_weights_of_a_pair_sum_to_one(path, min_null):
         a /= np.linalg.norm(a)
         ys = lp.pos[v].copy()
         ystar = ys + rng.uniform(-0.15, 0.15) * a + rng.uniform(-0.15, 0.15) * np.cross(nv, a)
-        st, f3, rt, d, yh = reconnect_surface(sa, lp, prm, v, q, child, n_null, tuple(ystar), tuple(nv),
-                                              tuple(ystar), 1.0, stack)
+        st, f3, rt, d, yh = reconnect_surface(sa, lp, prm, v, tuple(ystar), tuple(nv), tuple(ystar), 1.0, stack)
         if st != OK or not same_point(yh, tuple(ystar), tuple(lp.pos[q]), 1.0):
             continue
         lp2 = type(lp)(*(f.copy() for f in lp))      # the offset light path, as if it had been traced
         lp2.pos[v] = yh
         lp2.d_in[v] = d
-        st2, f3b, rtb, _, back = reconnect_surface(sa, lp2, prm, v, q, child, n_null, tuple(ys), tuple(nv),
-                                                   tuple(ys), 1.0, stack)
+        st2, f3b, rtb, _, back = reconnect_surface(sa, lp2, prm, v, tuple(ys), tuple(nv), tuple(ys), 1.0, stack)
         assert st2 == OK and np.allclose(back, ys, atol=1e-9)
         w = mis_weight_from_log_ratio(math.log(rt)) + mis_weight_from_log_ratio(math.log(rtb))
         assert w == pytest.approx(1.0, abs=1e-9)

@@ -58,7 +58,7 @@ from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
-from gdlearn.integrators.photon.gpm_gather import _finite3, _put
+from gdlearn.integrators.photon.photon_shift_loop import finite3, put
 from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_path
 from gdlearn.integrators.photon.gvpm_light import OK, reconnect
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
@@ -210,10 +210,10 @@ def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, buf, stack, out, hh, y, x)
         c_b = (beams[b, BEAM_W] * (ph * tr[0] * lp.beta[v, 0]) * ws,
                beams[b, BEAM_W + 1] * (ph * tr[1] * lp.beta[v, 1]) * ws,
                beams[b, BEAM_W + 2] * (ph * tr[2] * lp.beta[v, 2]) * ws)
-        if not _finite3(c_b):
+        if not finite3(c_b):
             nbad += 1
             continue
-        _put(out.phi, hh, 0, y, x, c_b, 1.0)
+        put(out.phi, hh, 0, y, x, c_b, 1.0)
         pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
         nbad += _shift_photon(sa, lp, v, gp, g, (o, d, b, t, r), offs, pre, c_b, stack, out, hh, y, x)
     return cnt, nbad
@@ -245,19 +245,19 @@ def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, stack, out, hh, y, x):
                 ph = hg_eval(g, d2[0] * w_in[0] + d2[1] * w_in[1] + d2[2] * w_in[2])
                 c_o = (ob[b, BEAM_W] * ph * pre[0] * f3[0], ob[b, BEAM_W + 1] * ph * pre[1] * f3[1],
                        ob[b, BEAM_W + 2] * ph * pre[2] * f3[2])
-                if not (_finite3(c_o) and math.isfinite(ratio)):
+                if not (finite3(c_o) and math.isfinite(ratio)):
                     nbad += 1
                     ok = False
                 elif not ratio > 0.0:
                     ok = False
         if not ok:
             out.count[hh, C_FAILED, y, x] += 1
-            _put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
             continue
         out.count[hh, C_NULL if kind == NULL else C_RECONNECTED, y, x] += 1
         if kind == REFLECTED:
             out.count[hh, C_MIXED, y, x] += 1
         wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic
-        _put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
-        _put(out.phi, hh, 5 + j, y, x, c_o, wgt)
+        put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
+        put(out.phi, hh, 5 + j, y, x, c_o, wgt)
     return nbad

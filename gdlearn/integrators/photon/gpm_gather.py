@@ -20,13 +20,15 @@ shifted to its four neighbours, and every photon it gathers follows by the hybri
    (weight 1, zero offset, counted), which keeps the gradient unbiased and makes it the primal
    finite difference for those photons.
 
-Organisation (for speed; benchmarks/README.md, GPM section): the pixel's nine photon buffers and its
-shift counts are summed in a row scratch term by term in photon order and written once -- the same
-additions in the same order as one write per term, so every buffer is bit for bit that of the
-straightforward kernel (tests/test_gpm_fast.py against tests/_gpm_reference.py); a photon's parent
-is re-evaluated towards the base direction once for its four shifts (``gpm_light.parent_base``),
-each shift evaluating only the offset direction (``parent_offset``); the shift, its projection and
-its reversibility check are inlined into the photon loop.
+Organisation (for speed; benchmarks/README.md, GPM section): the per-photon loop is
+:mod:`gdlearn.integrators.photon.photon_shift_loop`'s, shared with the surface part of the volumetric
+full images: the pixel's nine photon buffers and its shift counts are summed in a row scratch term by
+term in photon order and written once -- the same additions in the same order as one write per term,
+so every buffer is bit for bit that of the straightforward kernel (tests/test_gpm_fast.py against
+tests/_gpm_reference.py); a photon's parent is re-evaluated towards the base direction once for its
+four shifts (:func:`photon_base`: ``gpm_light.parent_base``), each shift evaluating only the offset
+direction (``parent_offset``); the shift, its projection and its reversibility check are inlined
+into the photon loop.
 
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).
@@ -48,23 +50,19 @@ from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.arrays import borrow, borrowed
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.kernels.jit import block, inlined, rows
 from gdlearn.kernels.rng import path_state, rand_at
-from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
-from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
-from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.integrators.photon.gather import _borrow_grid, gather_path, pixel_angle
 from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, manifold_photon, parent_base, parent_offset, project, \
     same_point
+from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset, finite3, \
+    make_shift_photons, offset_points, put, store_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
-
-#: outcome counters of the photon shifts (GpmOut.count[:, i]): reconnected, failed, moved by the manifold walk
-RECONNECTED, FAILED, MANIFOLD = 0, 1, 2
 
 
 class GpmOut(NamedTuple):
@@ -86,19 +84,30 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     """The hybrid shift's light half for photon row ``v`` gathered at ``base`` = (p, frame) and
     moved to the offset gather point ``off`` = (p', ng', frame', wi', mat'). Returns (status,
     photon term at the offset (before the camera weight), MIS density ratio offset / base)."""
-    q = lp.parent[v]
-    if q < 0:
-        return FAILED, (0.0, 0.0, 0.0), 0.0
-    return _shift(sa, lp, mtab, prm, v, q, parent_base(sa, lp, q, v), base, off, r, stack)
+    return _shift(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, stack)
 
 
 @inlined
-def _shift(sa, lp, mtab, prm, v, q, pbase, base, off, r, stack):
-    """:func:`shift_photon` for a photon with a parent (row q >= 0) whose base side ``pbase``
-    (:func:`gpm_light.parent_base`) is already known: the camera pass computes it once per photon
-    for the four neighbours. Inlined into the photon loop: a call passing the scene, the light
-    records and the two gather points as tuples costs about as much as the shift's arithmetic."""
+def photon_base(sa, lp, v, r, stack):
+    """Photon row v's base side, the same for its four shifts (photon_shift_loop's contract): its
+    parent row q and the parent re-evaluated towards the base direction (``gpm_light.parent_base``,
+    Hua et al. 2017 Sec. 4.2 Step 2; P_FAIL without a parent)."""
+    q = lp.parent[v]
+    if q < 0:
+        return q, (P_FAIL, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 0.0)
+    return q, parent_base(sa, lp, q, v)
+
+
+@inlined
+def _shift(sa, lp, mtab, prm, v, pb, base, off, r, stack):
+    """:func:`shift_photon` from the photon's base side ``pb`` = (q, parent_base) (:func:`photon_base`,
+    computed once per photon for the four neighbours). Inlined into the photon loop: a call passing
+    the scene, the light records and the two gather points as tuples costs about as much as the
+    shift's arithmetic."""
     zero = (0.0, 0.0, 0.0)
+    q, pbase = pb
+    if q < 0:
+        return FAILED, zero, 0.0
     p, frame = base
     p2, ng2, frame2, wi2, mat2 = off
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
@@ -115,7 +124,7 @@ def _shift(sa, lp, mtab, prm, v, q, pbase, base, off, r, stack):
     status, fr, pr = parent_offset(sa, lp, q, pbase, d)
     if status == 2:                                                        # a specular parent
         ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
-        return _at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
+        return at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
     if status != 0:
         return FAILED, zero, 0.0
     ok, _, yh, _ = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)   # Eq. 6
@@ -124,25 +133,7 @@ def _shift(sa, lp, mtab, prm, v, q, pbase, base, off, r, stack):
     geo = photon_geometry_ratio(yq, ys, nv, ystar, nstar)
     if not geo > 0.0:
         return FAILED, zero, 0.0
-    return _at_offset(RECONNECTED, lp, v, (fr[0] * geo, fr[1] * geo, fr[2] * geo), pr * geo, d, off)
-
-
-@inlined
-def _at_offset(status, lp, v, ratio3, ratio, w_arr, off):
-    """(status, term, ratio): the offset photon, of power beta_v x ratio3 arriving along w_arr, as
-    the offset gather point sees it (the base estimate's f Phi / |cos_g|, gather.density)."""
-    zero = (0.0, 0.0, 0.0)
-    if status == FAILED:
-        return FAILED, zero, 0.0
-    p2, ng2, frame2, wi2, mat2 = off
-    wo_w = (-w_arr[0], -w_arr[1], -w_arr[2])
-    cg = abs(dot(wo_w, ng2))
-    if not cg > 1e-9:
-        return FAILED, zero, 0.0
-    ns2, s2, t2 = frame2
-    f = bsdf_eval(mat2, wi2, to_local(wo_w, s2, t2, ns2))
-    return status, (f[0] * lp.beta[v, 0] * ratio3[0] / cg, f[1] * lp.beta[v, 1] * ratio3[1] / cg,
-                    f[2] * lp.beta[v, 2] * ratio3[2] / cg), ratio
+    return at_offset(RECONNECTED, lp, v, (fr[0] * geo, fr[1] * geo, fr[2] * geo), pr * geo, d, off)
 
 
 @inlined
@@ -163,17 +154,22 @@ def _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack):
     return prim >= 0 and same_point((o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]), ys, yq, r)
 
 
+#: the per-photon loop (photon_shift_loop) with GPM's surface shift
+_shift_photons = make_shift_photons(photon_base, _shift)
+
+
 @block
 def gpm_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     """Every pixel's two base gather points (samples sample0 + h, half h queries grids[h]) and their
     four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel;
     ``mtab`` the manifold shape rows of the primitives (the manifold branch's chains)."""
     _gpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), borrow(mtab), prm, seed,
-              sample0, radius, _borrow_out(out))
+              sample0, radius, borrow_out(out))
 
 
 @block
-def _borrow_out(o):
+def borrow_out(o):
+    """A :class:`GpmOut` of borrowed views (kernels.arrays.borrow) for a compiled pass."""
     return GpmOut(borrow(o.phi), borrow(o.le), borrow(o.m), borrow(o.foot), borrow(o.count), borrow(o.bad))
 
 
@@ -185,31 +181,14 @@ def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
 
 
 @block
-def _put(buf, hh, i, y, x, v, scale):
-    for c in range(3):
-        buf[hh, i, y, x, c] += scale * v[c]
-
-
-@inlined
-def _finite3(v):
-    return np.isfinite(v[0]) and np.isfinite(v[1]) and np.isfinite(v[2])
-
-
-@block
 def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     hgt, w = radius.shape
     cam = sa.camera
     nbad = 0
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     cand = np.empty(4096, dtype=np.int64)
-    # the four offset gather points of the current base sample
-    o_ok = np.zeros(4, dtype=np.bool_)
-    o_p = np.zeros((4, 3))
-    o_ng = np.zeros((4, 3))
-    o_fr = np.zeros((4, 3, 3))
-    o_wi = np.zeros((4, 3))
-    o_mat = np.zeros(4, dtype=np.int64)
-    o_beta = np.zeros((4, 3))
+    offs = offset_points()          # the four offset gather points of the current base sample
+    o_ok = offs[0]
     acc = np.empty((9, 3))          # the pixel's nine buffers while its photons are summed (_shift_photons)
     for x in range(w):
         for hh in range(2):
@@ -218,30 +197,22 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
             fy = y + rand_at(h, 1)
             o, d, tmax = camera_ray(cam, fx, fy)
             ok, p, ng, frame, wi, mid, beta, state, m, dist, le = gather_path(sa, prm, h, o, d, stack)
-            if _finite3(le):
-                _put(out.le, hh, 0, y, x, le, 1.0)
+            if finite3(le):
+                put(out.le, hh, 0, y, x, le, 1.0)
             for k in range(4):
                 o_ok[k] = False
                 xo, yo = x + SHIFT_DX[k], y + SHIFT_DY[k]
                 if not (0 <= xo < w and 0 <= yo < hgt):
-                    if _finite3(le):
-                        _put(out.le, hh, 1 + k, y, x, le, -1.0)      # a shift outside the image fails
+                    if finite3(le):
+                        put(out.le, hh, 1 + k, y, x, le, -1.0)      # a shift outside the image fails
                     continue
                 o2, d2, _ = camera_ray(cam, fx + SHIFT_DX[k], fy + SHIFT_DY[k])
                 ok2, p2, ng2, fr2, wi2, mid2, beta2, state2, m2, _, le2 = gather_path(sa, prm, h, o2, d2, stack)
-                if _finite3(le) and _finite3(le2):                   # replayed camera paths: w = 1/2 each way
-                    _put(out.le, hh, 1 + k, y, x, (le2[0] - le[0], le2[1] - le[1], le2[2] - le[2]), 0.5)
-                    _put(out.le, hh, 5 + k, y, x, le2, 0.5)
+                if finite3(le) and finite3(le2):                   # replayed camera paths: w = 1/2 each way
+                    put(out.le, hh, 1 + k, y, x, (le2[0] - le[0], le2[1] - le[1], le2[2] - le[2]), 0.5)
+                    put(out.le, hh, 5 + k, y, x, le2, 0.5)
                 if ok and ok2 and m2 == m and state2 == state:
-                    o_ok[k] = True
-                    for c in range(3):
-                        o_p[k, c] = p2[c]
-                        o_ng[k, c] = ng2[c]
-                        o_wi[k, c] = wi2[c]
-                        o_beta[k, c] = beta2[c]
-                        for a in range(3):
-                            o_fr[k, a, c] = fr2[a][c]
-                    o_mat[k] = mid2
+                    store_offset(offs, k, p2, ng2, fr2, wi2, mid2, beta2)
             if not ok:
                 continue
             out.foot[hh, y, x] = dist * pixel_angle(cam, fx, fy, d)
@@ -253,104 +224,6 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
-                                   (o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta), acc, stack)
+                                   offs, acc, stack)
     return nbad
 
-
-@inlined
-def _offset(offs, k):
-    o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta = offs
-    fr = ((o_fr[k, 0, 0], o_fr[k, 0, 1], o_fr[k, 0, 2]), (o_fr[k, 1, 0], o_fr[k, 1, 1], o_fr[k, 1, 2]),
-          (o_fr[k, 2, 0], o_fr[k, 2, 1], o_fr[k, 2, 2]))
-    return ((o_p[k, 0], o_p[k, 1], o_p[k, 2]), (o_ng[k, 0], o_ng[k, 1], o_ng[k, 2]), fr,
-            (o_wi[k, 0], o_wi[k, 1], o_wi[k, 2]), o_mat[k], (o_beta[k, 0], o_beta[k, 1], o_beta[k, 2]))
-
-
-@inlined
-def _admitted(lp, v, prm, m, state):
-    """Does photon row v complete the gather path (m camera vertices, class state) into a path the
-    pass estimates: within the depth limit, of a wanted class, in the gathered parent subset?"""
-    if lp.depth[v] + m + 1 > prm.max_depth:
-        return False
-    if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
-        return False
-    return parent_ok(lp, v, prm)
-
-
-@inlined
-def _base_term(lp, v, ng, frame, wi, mat, beta):
-    """(ok, c_b): photon v's term at the base gather point, camera weight x f x Phi / |cos_g| (SPPM's
-    density term, gather.density); not ok for a photon arriving grazing the gather point's surface."""
-    ns, s, tt = frame
-    wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
-    cg = abs(dot(wo_w, ng))
-    if not cg > 1e-9:
-        return False, (0.0, 0.0, 0.0)
-    f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
-    return True, (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
-                  beta[2] * f[2] * lp.beta[v, 2] / cg)
-
-
-@block
-def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, stack):
-    """The base gather point's photons cand[:n]: their base terms and their four shifts. The nine
-    buffers of the pixel (L, D_k, S_k) are summed in ``acc`` and the shift counts in integers, term
-    by term in photon order and written once at the end: the same additions in the same order as
-    one buffer write per term, so the buffers are those of the straightforward loop bit for bit
-    (tests/test_gpm_fast.py), without a call per term."""
-    p, ng, frame, wi, mid, beta, state, m = gp
-    mat = sa.materials[mid]
-    o_ok = offs[0]
-    nbad = 0
-    cnt = 0
-    counts = np.zeros(3, dtype=np.int64)
-    for j in range(9):
-        for c in range(3):
-            acc[j, c] = out.phi[hh, j, y, x, c]
-    for i in range(n):
-        v = cand[i]
-        if not _admitted(lp, v, prm, m, state):
-            continue
-        cnt += 1
-        ok, c_b = _base_term(lp, v, ng, frame, wi, mat, beta)
-        if not ok:
-            continue
-        if not _finite3(c_b):
-            nbad += 1
-            continue
-        for c in range(3):
-            acc[0, c] += c_b[c]
-        q = lp.parent[v]
-        # the parent's base side (Eq. 6's reconnection, or the manifold branch), once for all four
-        pbase = parent_base(sa, lp, q, v) if q >= 0 else (P_FAIL, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 0.0)
-        for k in range(4):
-            status = FAILED
-            c_o = (0.0, 0.0, 0.0)
-            ratio = 0.0
-            if o_ok[k] and q >= 0:
-                p2, ng2, fr2, wi2, mid2, beta2 = _offset(offs, k)
-                status, term, ratio = _shift(sa, lp, mtab, prm, v, q, pbase, (p, frame),
-                                             (p2, ng2, fr2, wi2, sa.materials[mid2]), r, stack)
-                if status != FAILED:
-                    c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
-                    if not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
-                        status = FAILED
-            counts[status] += 1
-            if status == FAILED:
-                for c in range(3):
-                    acc[1 + k, c] += -1.0 * c_b[c]                  # w = 1, no offset (Hua et al. Sec. 4.3)
-                continue
-            # Eq. 11, 1 / (1 + p'|J| / p), in both branches: a pair's two weights sum to 1 within
-            # 1e-9 (reconnection, tests/test_gpm.py) and 1e-4 (the walk's determinants are central
-            # differences; every manifold pair of a render pass, tests/test_gpm_manifold.py)
-            wgt = mis_weight_from_log_ratio(math.log(ratio))
-            for c in range(3):
-                acc[1 + k, c] += wgt * (c_o[c] - c_b[c])
-                acc[5 + k, c] += wgt * c_o[c]
-    for j in range(9):
-        for c in range(3):
-            out.phi[hh, j, y, x, c] = acc[j, c]
-    for st in range(3):
-        out.count[hh, st, y, x] += counts[st]
-    out.m[hh, y, x] = cnt
-    return nbad

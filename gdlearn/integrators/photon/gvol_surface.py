@@ -29,31 +29,31 @@ buffer *is* VPM's surface estimate and emission, :mod:`gdlearn.integrators.photo
    after as many vertices of the same classes (GPM's symmetric rule; the beam structure the medium
    part requires is not needed here, where no beam is shifted).
 3. **Photon shift**: GPM's hybrid shift with the light edge through media
-   (:func:`gdlearn.integrators.photon.gvol_surface_light.shift_surface_photon`).
+   (:func:`gdlearn.integrators.photon.gvol_surface_light.shift_surface_photon`), in GPM's photon
+   loop (:mod:`gdlearn.integrators.photon.photon_shift_loop`): the photon's parent, its base half
+   and its recorded edge's media once per photon for the four neighbours, the pixel's buffers summed
+   in a row scratch in photon order and written once (bit for bit the straightforward loop's,
+   tests/test_gvol_surface_fast.py).
 4. **Emission** seen by the camera paths: the replayed pair, balance weight 1/2 each way (as GPM).
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.jit import block, rows
 from gdlearn.kernels.rng import path_state, rand_at
-from gdlearn.kernels.vec import dot, to_local
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_path
-from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, parent_ok, pixel_angle
-from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, _borrow_out, _finite3, _offset, _put, \
-    allocate
-from gdlearn.integrators.photon.gvol_surface_light import shift_surface_photon
-from gdlearn.shifts.mis import mis_weight_from_log_ratio
+from gdlearn.integrators.photon.gather import _borrow_grid, pixel_angle
+from gdlearn.integrators.photon.gpm_gather import allocate, borrow_out
+from gdlearn.integrators.photon.gvol_surface_light import photon_base, shift_from_base
+from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, finite3, make_shift_photons, \
+    offset_points, put, store_offset
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 
 #: the images of the surface shift counts and their rows in GpmOut.count (gpm_gather's outcomes)
@@ -68,16 +68,21 @@ def surface_pass(setup, lp, grids, mtab, prm, seed, sample0, radius):
     return out
 
 
+#: the per-photon loop (photon_shift_loop: GPM's) with the shift through media and null interfaces
+_shift_photons = make_shift_photons(photon_base, shift_from_base)
+
+
 @block
 def surface_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     """Every pixel's two base gather points (half hh queries grids[hh]) and their four shifts."""
     _surface_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), borrow(mtab), prm,
-                  seed, sample0, radius, _borrow_out(out))
+                  seed, sample0, radius, borrow_out(out))
 
 
 @rows
 def _surface_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
-    for y in prange(radius.shape[0]):
+    for row in prange(radius.shape[0]):
+        y = np.int64(row)           # one specialisation of _row (kernels/jit.py: prange's index type)
         out.bad[y] = _row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
 
 
@@ -90,8 +95,8 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     cand = np.empty(4096, dtype=np.int64)
     beams = np.empty((MAX_BEAMS, BEAM_COLS))
     bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
-    offs = (np.zeros(4, dtype=np.bool_), np.zeros((4, 3)), np.zeros((4, 3)), np.zeros((4, 3, 3)), np.zeros((4, 3)),
-            np.zeros(4, dtype=np.int64), np.zeros((4, 3)))
+    offs = offset_points()          # the four offset gather points of the current base sample
+    acc = np.empty((9, 3))          # the pixel's nine buffers while its photons are summed (_shift_photons)
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -99,8 +104,8 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
             fy = y + rand_at(h, 1)
             o, d, _ = camera_ray(cam, fx, fy)
             ok, p, ng, frame, wi, mid, beta, state, m, dist, le, _ = beam_path(sa, prm, h, o, d, stack, beams, bstate)
-            if _finite3(le):
-                _put(out.le, hh, 0, y, x, le, 1.0)
+            if finite3(le):
+                put(out.le, hh, 0, y, x, le, 1.0)
             for k in range(4):
                 _offset_path(sa, prm, h, fx, fy, x, y, w, hgt, k, stack, beams, bstate, (ok, state, m, le), offs,
                              out, hh)
@@ -115,7 +120,7 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand,
-                                   n, offs, stack)
+                                   n, offs, acc, stack)
     return nbad
 
 
@@ -124,76 +129,15 @@ def _offset_path(sa, prm, h, fx, fy, x, y, w, hgt, k, stack, beams, bstate, base
     """Neighbour k's replayed camera path: its emission pair into ``out.le`` and, if it reaches a gather
     point of the base's structure, that gather point into row k of ``offs`` (offs[0][k]: ok)."""
     ok, state, m, le = base
-    o_ok, o_p, o_ng, o_fr, o_wi, o_mat, o_beta = offs
-    o_ok[k] = False
+    offs[0][k] = False
     if not (0 <= x + SHIFT_DX[k] < w and 0 <= y + SHIFT_DY[k] < hgt):
-        if _finite3(le):
-            _put(out.le, hh, 1 + k, y, x, le, -1.0)          # a shift outside the image fails (E12)
+        if finite3(le):
+            put(out.le, hh, 1 + k, y, x, le, -1.0)          # a shift outside the image fails (E12)
         return
     o2, d2, _ = camera_ray(sa.camera, fx + SHIFT_DX[k], fy + SHIFT_DY[k])
     ok2, p2, ng2, fr2, wi2, mid2, beta2, state2, m2, _, le2, _ = beam_path(sa, prm, h, o2, d2, stack, beams, bstate)
-    if _finite3(le) and _finite3(le2):                       # replayed camera paths: w = 1/2 each way
-        _put(out.le, hh, 1 + k, y, x, (le2[0] - le[0], le2[1] - le[1], le2[2] - le[2]), 0.5)
-        _put(out.le, hh, 5 + k, y, x, le2, 0.5)
+    if finite3(le) and finite3(le2):                       # replayed camera paths: w = 1/2 each way
+        put(out.le, hh, 1 + k, y, x, (le2[0] - le[0], le2[1] - le[1], le2[2] - le[2]), 0.5)
+        put(out.le, hh, 5 + k, y, x, le2, 0.5)
     if ok and ok2 and m2 == m and state2 == state:
-        o_ok[k] = True
-        for c in range(3):
-            o_p[k, c] = p2[c]
-            o_ng[k, c] = ng2[c]
-            o_wi[k, c] = wi2[c]
-            o_beta[k, c] = beta2[c]                          # T of the offset's own beams inside
-            for a in range(3):
-                o_fr[k, a, c] = fr2[a][c]
-        o_mat[k] = mid2
-
-
-@block
-def _shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, stack):
-    """The base gather point's photons cand[:n]: their base terms (VPM's surface density, term by
-    term) and their four shifts."""
-    p, ng, frame, wi, mid, beta, state, m = gp
-    ns, s, tt = frame
-    mat = sa.materials[mid]
-    o_ok = offs[0]
-    nbad = 0
-    cnt = 0
-    for i in range(n):
-        v = cand[i]
-        if lp.depth[v] + m + 1 > prm.max_depth:
-            continue
-        if prm.filter_classes and not _class_ok(lp, v, state, prm.mask):
-            continue
-        if not parent_ok(lp, v, prm):
-            continue
-        cnt += 1
-        wo_w = (-lp.d_in[v, 0], -lp.d_in[v, 1], -lp.d_in[v, 2])
-        cg = abs(dot(wo_w, ng))
-        if not cg > 1e-9:
-            continue
-        f = bsdf_eval(mat, wi, to_local(wo_w, s, tt, ns))
-        c_b = (beta[0] * f[0] * lp.beta[v, 0] / cg, beta[1] * f[1] * lp.beta[v, 1] / cg,
-               beta[2] * f[2] * lp.beta[v, 2] / cg)
-        if not _finite3(c_b):
-            nbad += 1
-            continue
-        _put(out.phi, hh, 0, y, x, c_b, 1.0)
-        for k in range(4):
-            status = FAILED
-            ratio = 0.0
-            c_o = (0.0, 0.0, 0.0)
-            if o_ok[k]:
-                p2, ng2, fr2, wi2, mid2, beta2 = _offset(offs, k)
-                status, term, ratio = shift_surface_photon(sa, lp, mtab, prm, v, (p, frame),
-                                                           (p2, ng2, fr2, wi2, sa.materials[mid2]), r, stack)
-                c_o = (beta2[0] * term[0], beta2[1] * term[1], beta2[2] * term[2])
-                if status != FAILED and not (_finite3(c_o) and ratio > 0.0 and math.isfinite(ratio)):
-                    status = FAILED
-            out.count[hh, status, y, x] += 1
-            if status == FAILED:
-                _put(out.phi, hh, 1 + k, y, x, c_b, -1.0)           # w = 1, no offset (Hua et al. Sec. 4.3)
-                continue
-            wgt = mis_weight_from_log_ratio(math.log(ratio))       # Eq. 11 in ratio form (camera side: 1)
-            _put(out.phi, hh, 1 + k, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
-            _put(out.phi, hh, 5 + k, y, x, c_o, wgt)
-    out.m[hh, y, x] = cnt
-    return nbad
+        store_offset(offs, k, p2, ng2, fr2, wi2, mid2, beta2)     # beta2: T of the offset's own beams inside

@@ -8,9 +8,13 @@ projected from the photon's parent a = y_{s-1} (Eq. 6) -- the first surface othe
 interface on the ray a -> y*, so the projection walks through a medium's index-matched boundary as
 the light tracer did (:func:`walk_to_surface`). The parent is the nearest ancestor that is not a null
 interface (``gdlearn.integrators.photon.gvpm_light._ancestor``), and it is re-evaluated towards
-the new direction by ``gdlearn.integrators.photon.gvpm_light._parent_ratio``: the phase function
-at a medium vertex (HG is sampled exactly: value ratio = density ratio), GPM's
-:func:`gdlearn.integrators.photon.gpm_light.parent_factor` at a surface or an emitter. In ratio form,
+the new direction by :func:`gdlearn.integrators.photon.gvpm_light.parent_base_vol` and
+:func:`~gdlearn.integrators.photon.gvpm_light.parent_offset_vol`: the phase function at a medium
+vertex (HG is sampled exactly: value ratio = density ratio), GPM's
+:func:`gdlearn.integrators.photon.gpm_light.parent_base` / ``parent_offset`` at a surface or an
+emitter. The camera pass runs GPM's photon loop (:mod:`gdlearn.integrators.photon.photon_shift_loop`)
+with :func:`photon_base` -- the parent, its base half and the recorded edge's media, once per photon
+-- and :func:`shift_from_base` per neighbour. In ratio form,
 with beta the photon's power (its light subpath's f / p, the edge's T / P(pass) included;
 :mod:`gdlearn.photons.records`):
 
@@ -38,14 +42,15 @@ from gdlearn.kernels import layout as L
 from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_null, vertex_class
 from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
-from gdlearn.kernels.jit import block
+from gdlearn.kernels.jit import block, inlined
 from gdlearn.kernels.media.boundary import next_medium
 from gdlearn.kernels.media.medium import medium_params, pass_probability
 from gdlearn.photons.records import K_SURFACE
 from gdlearn.integrators.photon.gather import specular_vertex
-from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, _at_offset
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, same_point
-from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, MAX_CROSSINGS, OK, _ancestor, _parent_ratio, _spawn
+from gdlearn.integrators.photon.gpm_light import P_FAIL, P_SPECULAR, _dir, manifold_photon, same_point
+from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, MAX_CROSSINGS, OK, _ancestor, _spawn, \
+    parent_base_vol, parent_offset_vol
+from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -146,19 +151,40 @@ def _reversible(sa, lp, q, child, ys, yh, ystar, p, frame, p2, frame2, r, stack)
     return ok and same_point(yb, ys, yq, r)
 
 
-@block
-def reconnect_surface(sa, lp, prm, v, q, child, n_null, ystar, nstar, p2, r, stack):
-    """Photon row v's parent a = row q (its nearest non-null ancestor; ``child`` the row after it, the
-    edge crossing ``n_null`` null interfaces: ``gdlearn.integrators.photon.gvpm_light._ancestor``)
-    reconnected through y* (normal nstar) to the offset photon y'_s, which must lie within r of the
-    offset gather point p2. Returns (status OK | FAIL | FAIL_SPECULAR (a specular parent), power
-    ratio beta'_s / beta_s per channel, MIS density ratio, direction a -> y'_s, y'_s)."""
+@inlined
+def photon_base(sa, lp, v, r, stack):
+    """Surface photon row v's base side, the same for its four shifts (photon_shift_loop's contract):
+    (a = its nearest non-null ancestor's row q (-1: none), the row after a, the null interfaces the
+    edge a -> y_s crosses (``gvpm_light._ancestor``); a re-evaluated towards y_s
+    (``gvpm_light.parent_base_vol``); the recorded edge's (ok, optical depth, log pass probability)
+    for the reconnection's T and P ratios (walked through the null interfaces: once per photon, not
+    per shift); may a specular parent take the manifold walk (edge and chain in vacuum))."""
+    no_edge = (False, _ZERO, 0.0)
+    q, child, n_null = _ancestor(sa, lp, v)
+    if q < 0:
+        return q, child, n_null, (P_FAIL, _ZERO, (1.0, 1.0, 1.0), 0.0), no_edge, False
+    pb = parent_base_vol(sa, lp, q, v)
+    if pb[0] == P_SPECULAR:
+        return q, child, n_null, pb, no_edge, n_null == 0 and _vacuum_chain(lp, v)
+    if pb[0] == P_FAIL:
+        return q, child, n_null, pb, no_edge, False
+    return q, child, n_null, pb, _base_edge(sa, lp, q, child, n_null, v, r, stack), False
+
+
+@inlined
+def _reconnect(sa, lp, prm, v, pb, ystar, nstar, p2, r, stack):
+    """Photon row v's parent a (base side ``pb``, :func:`photon_base`) reconnected through y* (normal
+    nstar) to the offset photon y'_s, which must lie within r of the offset gather point p2 (Eq. 6
+    through null interfaces, with the edge's media). Returns (status OK | FAIL | FAIL_SPECULAR (a
+    specular parent), power ratio beta'_s / beta_s per channel, MIS density ratio, direction
+    a -> y'_s, y'_s)."""
+    q, child, n_null, pbase, edge, _ = pb
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     d, dl = _dir(yq, ystar)
     if not dl > 0.0:
         return FAIL, _ZERO, 0.0, d, ys
-    status, fr, pr = _parent_ratio(sa, lp, q, v, d)
+    status, fr, pr = parent_offset_vol(sa, lp, q, pbase, d)
     if status != OK:
         return status, _ZERO, 0.0, d, ys
     # Eq. 6 through null interfaces: the first real surface on the ray a -> y*
@@ -170,7 +196,7 @@ def reconnect_surface(sa, lp, prm, v, q, child, n_null, ystar, nstar, p2, r, sta
         return FAIL, _ZERO, 0.0, d, ys                                     # no photon is stored there
     if not (yh[0] - p2[0]) ** 2 + (yh[1] - p2[1]) ** 2 + (yh[2] - p2[2]) ** 2 < r * r:
         return FAIL, _ZERO, 0.0, d, ys                                     # outside the offset kernel
-    ok, tau_b, logp_b = _base_edge(sa, lp, q, child, n_null, v, r, stack)
+    ok, tau_b, logp_b = edge
     geo = photon_geometry_ratio(yq, ys, (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2]), ystar, nstar)
     if not (ok and geo > 0.0):
         return FAIL, _ZERO, 0.0, d, ys
@@ -181,23 +207,39 @@ def reconnect_surface(sa, lp, prm, v, q, child, n_null, ystar, nstar, p2, r, sta
 
 
 @block
+def reconnect_surface(sa, lp, prm, v, ystar, nstar, p2, r, stack):
+    """The reconnection of surface photon row v through y* alone (:func:`photon_base` then the
+    reconnection; the shift without the manifold branch and the reversibility check): (status,
+    power ratio per channel, MIS density ratio, direction a -> y'_s, y'_s). For checks of a pair
+    of shifts (tests/test_gvpm_full.py: the two MIS weights sum to one)."""
+    return _reconnect(sa, lp, prm, v, photon_base(sa, lp, v, r, stack), ystar, nstar, p2, r, stack)
+
+
+@block
 def shift_surface_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     """The light half of surface photon row v's shift from the base gather point ``base`` = (p, frame)
     to the offset one ``off`` = (p', ng', frame', wi', mat'), kernel radius r. Returns (status, the
     photon term at the offset before the camera weight, MIS density ratio offset / base): the
     contract of :func:`gdlearn.integrators.photon.gpm_gather.shift_photon`."""
-    p, frame = base
-    p2, ng2, frame2, wi2, mat2 = off
-    q, child, n_null = _ancestor(sa, lp, v)
+    return shift_from_base(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, stack)
+
+
+@inlined
+def shift_from_base(sa, lp, mtab, prm, v, pb, base, off, r, stack):
+    """:func:`shift_surface_photon` from the photon's base side ``pb`` (:func:`photon_base`, computed
+    once per photon for the four neighbours); inlined into the photon loop (photon_shift_loop)."""
+    q = pb[0]
     if q < 0:
         return FAILED, _ZERO, 0.0
+    p, frame = base
+    p2, ng2, frame2, wi2, mat2 = off
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     ystar = offset_target(ys, p, frame, p2, frame2)                        # Eq. 5
     nstar = rotate((lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2]), frame, frame2)
-    status, f3, ratio, d, yh = reconnect_surface(sa, lp, prm, v, q, child, n_null, ystar, nstar, p2, r, stack)
-    if status == FAIL_SPECULAR and n_null == 0 and _vacuum_chain(lp, v):
+    status, f3, ratio, d, yh = _reconnect(sa, lp, prm, v, pb, ystar, nstar, p2, r, stack)
+    if status == FAIL_SPECULAR and pb[5]:                                  # chain and edge in vacuum
         ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
-        return _at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
-    if not (status == OK and _reversible(sa, lp, q, child, ys, yh, ystar, p, frame, p2, frame2, r, stack)):
+        return at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
+    if not (status == OK and _reversible(sa, lp, q, pb[1], ys, yh, ystar, p, frame, p2, frame2, r, stack)):
         return FAILED, _ZERO, 0.0
-    return _at_offset(RECONNECTED, lp, v, f3, ratio, d, off)
+    return at_offset(RECONNECTED, lp, v, f3, ratio, d, off)

@@ -48,27 +48,52 @@ from gdlearn.kernels.media.boundary import next_medium
 from gdlearn.kernels.media.medium import distance_pdf, medium_params, pass_probability
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.photons.records import K_MEDIUM, K_SURFACE
-from gdlearn.integrators.photon.gpm_light import _dir, parent_factor
+from gdlearn.integrators.photon.gpm_light import _dir, parent_base, parent_offset
 
 #: reconnect() outcomes
 OK, FAIL, FAIL_SPECULAR = 0, 1, 2
 
 
+#: parent_base_vol's kind of a medium parent (beside gpm_light's P_FAIL .. P_SPECULAR)
+P_MEDIUM = 4
+
+
 @inlined
 def _parent_ratio(sa, lp, q, v, w_new):
     """(status, f_a(w') / f_a(w) per channel, p_w(w') / p_w(w)) of parent row q towards w_new."""
-    one = (1.0, 1.0, 1.0)
+    return parent_offset_vol(sa, lp, q, parent_base_vol(sa, lp, q, v), w_new)
+
+
+@inlined
+def parent_base_vol(sa, lp, q, v):
+    """The half of :func:`_parent_ratio` that does not depend on the new direction, for photon row v
+    and its parent row q (Gruson et al. 2018, Sec. 4.3: the light subpath up to a is kept): at a
+    medium vertex (P_MEDIUM, Mitsuba's wi, the phase function towards the base direction in every
+    channel, the HG asymmetry g), else ``gpm_light.parent_base`` (Hua et al. 2017, Sec. 4.2). Once
+    per photon where one photon is shifted to several neighbours (the surface pass)."""
     if lp.kind[q] == K_MEDIUM:
         g = medium_params(sa.media[lp.obj[q]])[2]
         w_old, _ = _dir((lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2]), (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
         wi = (-lp.d_in[q, 0], -lp.d_in[q, 1], -lp.d_in[q, 2])       # Mitsuba's wi: back along the arrival
         fb = hg_eval(g, wi[0] * w_old[0] + wi[1] * w_old[1] + wi[2] * w_old[2])
+        return P_MEDIUM, wi, (fb, fb, fb), g
+    return parent_base(sa, lp, q, v)
+
+
+@inlined
+def parent_offset_vol(sa, lp, q, base, w_new):
+    """:func:`_parent_ratio` towards ``w_new`` from its base half ``base`` (:func:`parent_base_vol`):
+    (status OK | FAIL | FAIL_SPECULAR, value ratio per channel, density ratio)."""
+    one = (1.0, 1.0, 1.0)
+    kind, wi, fb3, g = base
+    if kind == P_MEDIUM:
+        fb = fb3[0]
         fo = hg_eval(g, wi[0] * w_new[0] + wi[1] * w_new[1] + wi[2] * w_new[2])
         if not (fb > 0.0 and fo > 0.0):
             return FAIL, one, 0.0
         r = fo / fb                   # HG is sampled exactly: the pdf ratio is the value ratio
         return OK, (r, r, r), r
-    status, fr, pr = parent_factor(sa, lp, q, v, w_new)
+    status, fr, pr = parent_offset(sa, lp, q, base, w_new)
     if status == 2:
         return FAIL_SPECULAR, one, 0.0
     if status != 0:
