@@ -21,8 +21,8 @@ kind, reflection or refraction, at the offset's own angles), and the light side 
 p_w(w') / p_w(w) J_w prod_j P'_j / P_j (P the discrete lobe probabilities).
 
 Refused (the shift fails, weight 1): chains longer than MAX_CHAIN, through a non-analytic shape,
-a null interface, an emitter, a non-delta specular lobe or a dielectric (mirrors only, for now:
-see :func:`chain_rows`); a walk that does not converge or walks
+a null interface, an emitter or a non-delta specular lobe (mirrors and smooth glass are walked,
+each vertex keeping its lobe: a refraction stays a refraction); a walk that does not converge or walks
 back to another chain (near caustics several chains join the same endpoints); an offset chain
 that is occluded or leaves its shapes; an offset photon its own parent does not see back to y_s
 (the paper's reversibility check), or one the projection moved off y* (its inverse shift, from the
@@ -155,11 +155,7 @@ def chain_rows(sa, lp, mtab, q, rows):
     while u >= 0 and lp.kind[u] == K_SURFACE and (lp.flags[u] & F_DELTA_OUT) != 0:
         prim = lp.prim[u]
         if k == MAX_CHAIN or prim < 0 or lp.lobe[u] < 0 or mtab[prim, M.SH_TYPE] < 0.0 \
-                or sa.prim_info[prim, INFO_EMITTER] >= 0 or not bsdf_is_delta_only(sa.materials[lp.obj[u]]) \
-                or int(sa.materials[lp.obj[u]][L.MAT_TYPE]) != L.CONDUCTOR:
-            # dielectric chains are refused: on the glass-sphere caustic (scenes/caustic-closeup.xml)
-            # their gradients failed the fixed-radius unbiasedness test (mean z^2 1.65 over 40 seeds,
-            # concentrated on rare photons at the caustic's rim) for a reason not yet found
+                or sa.prim_info[prim, INFO_EMITTER] >= 0 or not bsdf_is_delta_only(sa.materials[lp.obj[u]]):
             return 0, -1
         rows[k] = u
         k += 1
