@@ -21,7 +21,8 @@ import pytest
 from scipy.optimize import fsolve
 
 from gdlearn.integrators import make
-from gdlearn.integrators.photon.gpm_light import manifold_photon, parent_factor
+from gdlearn.integrators.photon.gpm_light import parent_factor
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.scene.load import load

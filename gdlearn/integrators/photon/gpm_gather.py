@@ -58,8 +58,8 @@ from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_path, parent_ok, pixel_angle
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, manifold_photon, parent_base, parent_offset, project, \
-    same_point
+from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, parent_base, parent_offset, project, same_point
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 

@@ -44,7 +44,8 @@ from gdlearn.kernels.media.medium import medium_params, pass_probability
 from gdlearn.photons.records import K_SURFACE
 from gdlearn.integrators.photon.gather import specular_vertex
 from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, _at_offset
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, same_point
+from gdlearn.integrators.photon.gpm_light import _dir, same_point
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, MAX_CROSSINGS, OK, _ancestor, _parent_ratio, _spawn
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 
