@@ -42,7 +42,7 @@ from gdlearn.integrators import make  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
 SCENES = "scenes/fog-box.xml,scenes/spot-medium.xml"
-KINDS = ("null", "mixed", "reconnected", "failed")
+KINDS = ("null", "mixed", "reconnected", "failed", "manifold")
 
 
 def interleaved_times(integs: dict, repeats: int):
@@ -66,12 +66,12 @@ def shift_line(name: str, res) -> str:
     """The stage split and photon-shift statistics of a gradient pass (per gathered photon and neighbour)."""
     st = res.stats
     c = {k: st[f"photon_shifts_{k}"] for k in KINDS}
-    tot = max(c["null"] + c["reconnected"] + c["failed"], 1)
+    tot = max(c["null"] + c["reconnected"] + c["failed"] + c["manifold"], 1)
     stage = {k: res.timings.get(k, 0.0) for k in ("photons", "build", "gather")}
     return (f"    {name:12s} stages: light paths {stage['photons']:.3f} s, build {stage['build']:.3f} s, gather "
             f"{stage['gather']:.3f} s; photon shifts: null {c['null'] / tot:.1%}, reconnected "
-            f"{c['reconnected'] / tot:.1%} (of which reflected by Eq. 16 {c['mixed'] / tot:.1%}), failed "
-            f"{c['failed'] / tot:.1%}; gathered photons {st['volume_photons_gathered']}")
+            f"{c['reconnected'] / tot:.1%} (reflected by Eq. 16 {c['mixed'] / tot:.1%}: reconnected or walked), walked "
+            f"{c['manifold'] / tot:.1%}, failed {c['failed'] / tot:.1%}; gathered photons {st['volume_photons_gathered']}")
 
 
 def pass_times(path, a) -> None:

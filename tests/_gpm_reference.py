@@ -25,7 +25,8 @@ from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, gather_pa
 from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, GpmOut
 from gdlearn.integrators.photon.photon_shift_loop import finite3 as _finite3, put as _put
 from gdlearn.integrators.photon.gather import specular_vertex
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, project, same_point
+from gdlearn.integrators.photon.gpm_light import _dir, project, same_point
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.kernels.bsdf.dispatch import bsdf_pdf
 from gdlearn.kernels.vec import coordinate_system
 from gdlearn.photons.records import K_EMITTER, K_SURFACE

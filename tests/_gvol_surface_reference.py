@@ -29,7 +29,8 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid, _class_ok, parent_ok, pixel_angle, specular_vertex
 from gdlearn.integrators.photon.gpm_gather import FAILED, MANIFOLD, RECONNECTED, GpmOut
-from gdlearn.integrators.photon.gpm_light import _dir, manifold_photon, parent_factor, same_point
+from gdlearn.integrators.photon.gpm_light import _dir, parent_factor, same_point
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.gvol_surface_light import _segment, walk_to_surface
 from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, OK, _ancestor, _spawn
 from gdlearn.shifts.mis import mis_weight_from_log_ratio

@@ -57,8 +57,8 @@ from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, gather_path, pixel_angle
-from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, manifold_photon, parent_base, parent_offset, project, \
-    same_point
+from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, parent_base, parent_offset, project, same_point
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset, finite3, \
     make_shift_photons, offset_points, put, store_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate

@@ -47,9 +47,10 @@ from gdlearn.kernels.media.boundary import next_medium
 from gdlearn.kernels.media.medium import medium_params, pass_probability
 from gdlearn.photons.records import K_SURFACE
 from gdlearn.integrators.photon.gather import specular_vertex
-from gdlearn.integrators.photon.gpm_light import P_FAIL, P_SPECULAR, _dir, manifold_photon, same_point
+from gdlearn.integrators.photon.gpm_light import P_FAIL, P_SPECULAR, _dir, same_point
 from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, MAX_CROSSINGS, OK, _ancestor, _spawn, \
     parent_base_vol, parent_offset_vol
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 

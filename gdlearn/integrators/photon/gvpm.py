@@ -8,8 +8,8 @@ weighted-offset buffers of :mod:`gdlearn.integrators.gradients`, and the frame c
 (the MIS-weighted one, :func:`gdlearn.integrators.gradients.mis_primal`: the offset paths reused,
 PHOTONS.md Sec. 0.2), ``primal_base`` (VPM's own estimate, bit for bit the same photons and gather
 points), ``gx``, ``gy`` for the reconstructions (``--recon l1|l2|cv|cv-weighted``), and per-pixel
-shift counts ``shift_null``, ``shift_mixed``, ``shift_reconnected``, ``shift_failed`` (summed over
-passes; mixed ones are reconnected too).
+shift counts ``shift_null``, ``shift_mixed``, ``shift_reconnected``, ``shift_failed``,
+``shift_manifold`` (summed over passes; mixed ones are reconnected too).
 
 ``transport="all"`` (default): VPM's full image -- the emission the camera paths see, the surface
 photon estimate at the first non-specular vertex (through the media before it) and the medium
@@ -33,9 +33,11 @@ halve M). Surface shift counts: ``shift_surface_reconnected``, ``shift_surface_m
 
 ``shift="mixed"`` (default; Eq. 16) or ``"simple"`` (every photon translated by d' - d and
 reconnected). Reconnections cross null interfaces (a medium's boundary) as the base edge did
-(:mod:`gdlearn.integrators.photon.gvpm_light`). Volume photons whose parent is specular fail their
-shift (counted): the manifold walk of Sec. 4.3 is not implemented for volumes yet; surface photons
-take GPM's manifold walk when their specular chain lies in vacuum, and fail otherwise
+(:mod:`gdlearn.integrators.photon.gvpm_light`). A volume photon whose parent is specular (the cone
+under a glass ball: scenes/volume-caustic.xml) takes the manifold walk of Sec. 4.3 when its chain
+lies in vacuum (:func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`: converged,
+not the paper's relaxed acceptance, so a fixed radius stays unbiased), and fails otherwise; surface
+photons take GPM's manifold walk on the same condition
 (:mod:`gdlearn.integrators.photon.gvol_surface_light`).
 """
 from __future__ import annotations
@@ -55,7 +57,7 @@ from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
 #: the medium part's shift counts (gvpm_gather.C_*)
-_MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed")
+_MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed", "manifold")
 
 
 class GVPM(VPM):
@@ -74,12 +76,13 @@ class GVPM(VPM):
         super().__init__(scene, transport=transport, radii="fixed", **options)
         self.shift = shift
         self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed")
-        self.mtab = manifold_table(scene, self.setup.sa) if self.vparams.surfaces else None
+        self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 
     def _gvpm(self, lp, vgrids, sample0, radius):
         out = gg.allocate(self.height, self.width)
         with self.setup.parallel(self.height):
-            gg.gvpm_rows(self.setup.sa, lp, vgrids, self.gather_params, self.gv, self.seed, sample0, radius, out)
+            gg.gvpm_rows(self.setup.sa, lp, vgrids, self.mtab, self.gather_params, self.gv, self.seed, sample0, radius,
+                         out)
         return out
 
     def _surface(self, lp, sgrids, sample0, radius):
@@ -106,7 +109,7 @@ class GVPM(VPM):
         self.Nv = np.zeros((h, w))
         self.rv = np.full((h, w), self.rv0)
         self.Dv = np.zeros((2, 9, h, w, 3))
-        self.counts = np.zeros((4, h, w))
+        self.counts = np.zeros((len(_MEDIUM_COUNTS), h, w))
         # the surface part (zeros under transport="media": the sums below need no branch)
         self.N = np.zeros((h, w))
         self.D = np.zeros((2, 9, h, w, 3))

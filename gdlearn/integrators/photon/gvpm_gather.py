@@ -19,7 +19,8 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    d' = c' + t w'_c on the offset's beam b; fails where that beam is shorter than t.
 4. **Photon shift** (Eq. 16, mixed by default; ``simple``: every photon translated), then the light
    subpath: unchanged for a null-shifted photon (T(y) = y), else reconnected from its parent
-   (:func:`gdlearn.integrators.photon.gvpm_light.reconnect`).
+   (:func:`gdlearn.integrators.photon.gvpm_light.reconnect`), or -- a specular parent -- completed by
+   the manifold walk (Sec. 4.3, :mod:`gdlearn.integrators.photon.photon_manifold`).
 5. **MIS** (Eq. 19, balance heuristic in ratio form, :func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`):
    the offset over base density ratio is the camera side's ``[P'(b) p'(t)] / [P(b) p(t)]`` -- the
    offset's own beam-selection probability and its truncated-exponential density on its own beam,
@@ -38,7 +39,9 @@ a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_l
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
 VPM does); ``count`` the photon shifts: null (b' = b), mixed (reflected by Eq. 16; they are also
-counted as reconnected), reconnected (a light subpath completed), failed (camera or light side).
+counted as reconnected or walked), reconnected (a light subpath completed from the photon's parent),
+failed (camera or light side), manifold (completed by the walk of a specular chain above the parent,
+:func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`).
 """
 from __future__ import annotations
 
@@ -60,15 +63,17 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
-from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect_edge, \
-    store_edge
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, FAIL_SPECULAR, OK, base_edge, load_edge, \
+    reconnect_edge, store_edge
+from gdlearn.integrators.photon.photon_manifold import manifold_volume_photon
 from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 from gdlearn.shifts.volume_photon import NULL, REFLECTED, camera_distance_copy, photon_shift, truncated_distance_pdf
 
-#: GvpmOut.count[:, i]: null-shifted, mixed (reflected), reconnected, failed photon shifts
-C_NULL, C_MIXED, C_RECONNECTED, C_FAILED = 0, 1, 2, 3
+#: GvpmOut.count[:, i]: null-shifted, mixed (reflected), reconnected, failed photon shifts, and those
+#: completed by the manifold walk (a specular parent)
+C_NULL, C_MIXED, C_RECONNECTED, C_FAILED, C_MANIFOLD = 0, 1, 2, 3, 4
 
 
 class GvpmParams(NamedTuple):
@@ -79,7 +84,7 @@ class GvpmParams(NamedTuple):
 class GvpmOut(NamedTuple):
     phi: np.ndarray       # (2, 9, H, W, 3): L, D_k, S_k of the medium terms, without 1 / V(R)
     m: np.ndarray         # (2, H, W): photons the base gather points found (SPPM's M)
-    count: np.ndarray     # (2, 4, H, W): photon shifts null / mixed / reconnected / failed
+    count: np.ndarray     # (2, 5, H, W): photon shifts null / mixed / reconnected / failed / manifold
     bad: np.ndarray       # (H,): non-finite terms dropped
 
 
@@ -93,26 +98,27 @@ class Scratch(NamedTuple):
 
 
 def allocate(h: int, w: int) -> GvpmOut:
-    return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, 4, h, w)), np.zeros(h, np.int64))
+    return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, 5, h, w)), np.zeros(h, np.int64))
 
 
 @block
-def gvpm_rows(sa, lp, grids, prm, gv, seed, sample0, radius, out):
+def gvpm_rows(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out):
     """Every pixel's two camera samples (sample0 + hh; half hh gathers grids[hh]) and their four shifts
-    into ``out`` (a :class:`GvpmOut`); ``radius`` (H x W) is the kernel radius per pixel."""
-    _gvpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), prm, gv, seed, sample0,
-               radius, GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
+    into ``out`` (a :class:`GvpmOut`); ``radius`` (H x W) is the kernel radius per pixel, ``mtab`` the
+    specular shapes the manifold walk moves (``gpt_surface.manifold.manifold_table``)."""
+    _gvpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), mtab, prm, gv, seed,
+               sample0, radius, GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
 
 
 @rows
-def _gvpm_rows(sa, lp, ga, gb, prm, gv, seed, sample0, radius, out):
+def _gvpm_rows(sa, lp, ga, gb, mtab, prm, gv, seed, sample0, radius, out):
     for row in prange(radius.shape[0]):
         y = np.int64(row)           # one specialisation of _row (kernels/jit.py: prange's index type)
-        out.bad[y] = _row(sa, lp, (ga, gb), prm, gv, seed, sample0, radius, out, y)
+        out.bad[y] = _row(sa, lp, (ga, gb), mtab, prm, gv, seed, sample0, radius, out, y)
 
 
 @block
-def _row(sa, lp, grids, prm, gv, seed, sample0, radius, out, y):
+def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
     hgt, w = radius.shape
     nbad = 0
     stack = np.empty(STACK_SIZE, dtype=np.int32)
@@ -139,8 +145,8 @@ def _row(sa, lp, grids, prm, gv, seed, sample0, radius, out, y):
             for k in range(4):
                 o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
                                        beams, bstate, nb, obeams[k], obstate[k])
-            nbad += _samples(sa, lp, grids[hh], prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, scr, stack,
-                             out, hh, y, x)
+            nbad += _samples(sa, lp, grids[hh], mtab, prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, scr,
+                             stack, out, hh, y, x)
     return nbad
 
 
@@ -204,7 +210,7 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
 
 
 @block
-def _samples(sa, lp, grid, prm, gv, h, base, offs, r, scr, stack, out, hh, y, x):
+def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, r, scr, stack, out, hh, y, x):
     """VPM's K distance samples of one camera path, their photons and the photons' shifts."""
     beams, bstate, nb = base
     og = scr.og
@@ -233,7 +239,7 @@ def _samples(sa, lp, grid, prm, gv, h, base, offs, r, scr, stack, out, hh, y, x)
         cnt += n
         nbad += nbad0
         for j in range(4):
-            nbad += _neighbour(sa, lp, scr, n, dg, g, r, gv.mixed, og, j, stack, out, hh, y, x)
+            nbad += _neighbour(sa, lp, mtab, scr, n, dg, g, r, gv.mixed, og, j, stack, out, hh, y, x)
     out.m[hh, y, x] = cnt
     return nbad
 
@@ -279,7 +285,7 @@ def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
 
 
 @inlined
-def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
+def _neighbour(sa, lp, mtab, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
     """The photons of one distance sample (scratch rows 0..n) shifted to neighbour j's gather point
     og[j]: D_j, S_j and the shift counts summed in registers in photon order, written once. Inlined:
     a call passing the scene and the light records costs more than a null shift (~0.7 us measured for
@@ -290,6 +296,7 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
     n_mixed = 0
     n_rec = 0
     n_fail = 0
+    n_walk = 0
     nbad = 0
     cam = og[j, 0] > 0.0
     dp = (og[j, 1], og[j, 2], og[j, 3])
@@ -302,6 +309,7 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
         ratio = 0.0
         ok = cam
         kind = NULL
+        walked = False
         if ok:
             b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
             f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
@@ -309,6 +317,10 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
                 if scr.edge[i, 0] == EDGE_UNKNOWN:
                     store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
                 status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
+                if status == FAIL_SPECULAR:                    # Sec. 4.3: the chain above a moves too
+                    status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
+                                                                  stack)
+                    walked = True
                 ok = status == OK
             if ok:
                 ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
@@ -330,7 +342,8 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
             n_null += 1
             wgt = og[j, 11]                                    # a null shift's: the camera side's
         else:
-            n_rec += 1
+            n_rec += not walked
+            n_walk += walked
             n_mixed += kind == REFLECTED
             wgt = mis_weight_from_log_ratio(math.log(ratio))   # Eq. 19, balance heuristic
         d0 += wgt * (c_o[0] - c_b[0])
@@ -345,4 +358,5 @@ def _neighbour(sa, lp, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
     out.count[hh, C_MIXED, y, x] += n_mixed
     out.count[hh, C_RECONNECTED, y, x] += n_rec
     out.count[hh, C_FAILED, y, x] += n_fail
+    out.count[hh, C_MANIFOLD, y, x] += n_walk
     return nbad

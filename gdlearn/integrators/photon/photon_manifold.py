@@ -1,0 +1,310 @@
+"""The manifold branch of a photon shift: a photon whose parent lies on a specular chain (Hua et al.
+2017, Sec. 4.2 Step 2, Eq. 7-8; PHOTONS.md Sec. 2.5) -- a surface photon, :func:`manifold_photon`,
+or a volume photon (Gruson et al. 2018, Sec. 4.3), :func:`manifold_volume_photon`.
+
+The light subpath is y_b -> y_{b+1} .. y_{s-1} -> y_s, with y_b the last non-specular vertex (a
+diffuse or glossy surface, or the emitter) and y_{b+1} .. y_{s-1} k = 1..MAX_CHAIN vertices on delta
+BSDFs of analytic shapes (spheres, rectangles: ``gdlearn.integrators.path.gpt_surface.manifold.manifold_table``).
+The offset photon y'_s is given (a surface photon: y* of Eq. 5 projected from the base parent y_{s-1},
+Eq. 6; a volume photon: b' of the photon shift, Eq. 16); the Newton walk of
+``gdlearn.shifts.manifold.manifold_walk`` (at most 5 iterations, the paper's) then moves the chain
+so that it joins the fixed y_b to y'_s with every half vector kept. Jacobian (Eq. 7):
+
+    ``|dy'_{b+1}/dy_{b+1}|`` = ``|dy'_{b+1}/dy'_s|`` ``|dy'_s/dy_s|`` ``|dy_s/dy_{b+1}|``,
+
+the outer factors the generalised geometry ratios of Eq. 8 (``gdlearn.shifts.manifold.chain_endpoint_det``,
+the implicit function theorem on the half-vector constraints with y_b fixed), the middle one Eq. 6
+for a surface photon and 1 for a volume photon (Gruson et al. 2018 Eq. 16 moves b in volume measure
+with unit Jacobian). At a volume photon the endpoint's chart is the plane across the last segment
+(``ne`` = its direction): moving b along the segment leaves the chain unchanged, so the volume
+element dV = dA_perp dt and the distance t sampled from y_{s-1} is shared by the map's two sides.
+In the solid angle of the direction leaving y_b (what the light tracer sampled) the Jacobian is
+multiplied by (``|cos'_{b+1}|`` / d'^2) / (``|cos_{b+1}|`` / d^2). The offset photon's power, in ratio
+form: beta'_s = beta_s [f_b(w') / f_b(w)] J_w prod_j F'_j / F_j (F the delta lobe values of the same
+kind, reflection or refraction, at the offset's own angles) -- times T(l') / T(l) of the last edge for
+a volume photon --, and the light side of the MIS ratio p_w(w') / p_w(w) J_w prod_j P'_j / P_j (P the
+discrete lobe probabilities) -- times the tracer's collision densities p_l(l') / p_l(l) for a volume
+photon.
+
+Refused (the shift fails, weight 1): chains longer than MAX_CHAIN, through a non-analytic shape,
+a null interface, an emitter or a non-delta specular lobe (mirrors and smooth glass are walked,
+each vertex keeping its lobe: a refraction stays a refraction); a walk that does not converge or walks
+back to another chain (near caustics several chains join the same endpoints); an offset chain
+that is occluded or leaves its shapes; for a surface photon, an offset photon its own parent does not
+see back to y_s (the paper's reversibility check), or one the projection moved off y* (its inverse
+shift, from the offset's own parent, would not return y_s); for a volume photon, a chain not in vacuum
+(the walk carries no transmittance) or a last edge that crosses another number of null interfaces or
+meets a surface before b' (:func:`gdlearn.integrators.photon.gvpm_light.edge_walk`, the whole segment).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.bsdf.dispatch import bsdf_is_delta_only
+from gdlearn.kernels.geometry import INFO_EMITTER, offset_origin
+from gdlearn.kernels.jit import block
+from gdlearn.kernels.vec import coordinate_system, dot, to_local
+from gdlearn.photons.records import F_DELTA_OUT, K_SURFACE
+from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row
+from gdlearn.integrators.path.gpt_surface.vertex import same_delta_lobe
+from gdlearn.integrators.photon.gpm_light import _dir, parent_factor, project, reaches, same_point
+from gdlearn.integrators.photon.gvpm_light import FAIL, OK, edge_walk
+from gdlearn.shifts import manifold as M
+from gdlearn.shifts.photon import projection_jacobian
+from gdlearn.shifts.policy import MAX_CHAIN
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
+@block
+def chain_rows(sa, lp, mtab, q, rows):
+    """The specular chain above photon parent ``q``: rows[0] = y_{s-1}, rows[1] = y_{s-2}, ...
+    Returns (k, b): the chain length and the row of y_b, or k = 0 if the chain does not qualify."""
+    k = 0
+    u = q
+    while u >= 0 and lp.kind[u] == K_SURFACE and (lp.flags[u] & F_DELTA_OUT) != 0:
+        prim = lp.prim[u]
+        if k == MAX_CHAIN or prim < 0 or lp.lobe[u] < 0 or mtab[prim, M.SH_TYPE] < 0.0 \
+                or sa.prim_info[prim, INFO_EMITTER] >= 0 or not bsdf_is_delta_only(sa.materials[lp.obj[u]]):
+            return 0, -1
+        rows[k] = u
+        k += 1
+        u = lp.parent[u]
+    if k == 0 or u < 0:
+        return 0, -1
+    return k, u
+
+
+@block
+def _delta_value(mat, ns, w_in, w_out_world, refl):
+    """(F per channel, P, ok): the delta lobe of kind ``refl`` at a vertex of shading normal ns, the
+    light arriving along w_in (direction of travel), leaving along w_out_world (checked)."""
+    s, t = coordinate_system(ns)
+    wi = to_local((-w_in[0], -w_in[1], -w_in[2]), s, t, ns)
+    wo, wt, pdf, ok = same_delta_lobe(mat, wi, refl)
+    if not ok:
+        return (0.0, 0.0, 0.0), 0.0, False
+    wl = to_local(w_out_world, s, t, ns)
+    if not abs(wo[0] - wl[0]) + abs(wo[1] - wl[1]) + abs(wo[2] - wl[2]) <= 1e3 * POS_TOL:   # as gpt's manifold
+        return (0.0, 0.0, 0.0), 0.0, False
+    return (wt[0] * pdf, wt[1] * pdf, wt[2] * pdf), pdf, True
+
+
+@block
+def load_chain(sa, lp, mtab, v, rows, k):
+    """The chain from y_b's side, X[0] = y_{b+1} .. X[k-1] = y_{s-1}, with each vertex's shape row,
+    relative index and event (True: a refraction) as the base path took it."""
+    X = np.empty((k, 3))
+    shapes = np.empty((k, M.SH_WIDTH))
+    etas = np.empty(k)
+    refr = np.empty(k, dtype=np.bool_)
+    for j in range(k):
+        row = rows[k - 1 - j]
+        child = v if j == k - 1 else rows[k - 2 - j]
+        for c in range(3):
+            X[j, c] = lp.pos[row, c]
+        shapes[j] = mtab[lp.prim[row]]
+        etas[j] = sa.materials[lp.obj[row]][L.MAT_ETA]
+        n_row = (lp.nrm[row, 0], lp.nrm[row, 1], lp.nrm[row, 2])
+        din = (lp.d_in[row, 0], lp.d_in[row, 1], lp.d_in[row, 2])
+        dout = (lp.d_in[child, 0], lp.d_in[child, 1], lp.d_in[child, 2])
+        refr[j] = dot(din, n_row) * dot(dout, n_row) > 0.0      # travel keeps its side: it crossed
+    return X, shapes, etas, refr
+
+
+@block
+def walk_both_ways(yb, X, ys, ns, ye, ne, shapes, etas, refr, k):
+    """Walk the base chain X (y_b .. y_s) to the offset endpoint ye and back: the walk back must
+    find the base chain again (the shift is invertible). ns, ne: the endpoints' chart normals (the
+    walk holds its endpoint fixed; its derivative probes still move it in that chart). Returns (ok,
+    offset chain X', the base's half-vector targets, which Eq. 8's determinants take)."""
+    targets = np.empty((k, 2))
+    Xo = X.copy()
+    if not M.half_vector_targets(yb, X, ys, shapes, etas, refr, k, targets):
+        return False, Xo, targets
+    ok, _, _ = M.manifold_walk(yb, ye, ne, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+    if not ok:
+        return False, Xo, targets
+    Xb = Xo.copy()
+    ok, _, _ = M.manifold_walk(yb, ys, ns, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+    if not ok:
+        return False, Xo, targets
+    tol = 1e-7 * M.chain_length_scale(yb, X, ys, k)
+    for j in range(k):
+        for c in range(3):
+            if not abs(Xb[j, c] - X[j, c]) <= tol:
+                return False, Xo, targets
+    return True, Xo, targets
+
+
+@block
+def endpoint_dets(yb, X, ys, ns, Xo, ye, ne, shapes, etas, refr, targets, k):
+    """(ok, det_b, det_o): Eq. 8's ``|dy_{b+1}/dy_s|`` of the base chain and of the offset chain, each
+    endpoint moving in its chart (normal ns, ne: a surface's normal, or a volume photon's last
+    segment)."""
+    det_b, ok_b = M.chain_endpoint_det(yb, X, ys, ns, shapes, etas, refr, targets, k)
+    det_o, ok_o = M.chain_endpoint_det(yb, Xo, ye, ne, shapes, etas, refr, targets, k)
+    return ok_b and ok_o, det_b, det_o
+
+
+@block
+def offset_chain_normals(sa, lp, mtab, rows, k, yb, nb, Xo, r, stack):
+    """The offset chain must be what a light path would trace: y_b -> y'_{b+1} .. -> y'_{s-1}, each
+    segment reaching its vertex on the base vertex's shape. Returns (ok, normals): per vertex the
+    geometric (0:3) and shading (3:6) normal of the hit."""
+    a, n_a = yb, nb
+    nrm_o = np.empty((k, 6))
+    for j in range(k):
+        bj = (Xo[j, 0], Xo[j, 1], Xo[j, 2])
+        good, pj, ngj, nsj = reaches(sa, a, n_a, bj, r, stack)
+        if not (good and _same_row(mtab, pj, lp.prim[rows[k - 1 - j]])):
+            return False, nrm_o
+        for c in range(3):
+            nrm_o[j, c], nrm_o[j, 3 + c] = ngj[c], nsj[c]
+        a, n_a = bj, ngj
+    return True, nrm_o
+
+
+@block
+def yb_of(lp, b):
+    return (lp.pos[b, 0], lp.pos[b, 1], lp.pos[b, 2])
+
+
+@block
+def chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, ye, nrm_o, refr, j_area):
+    """The offset light subpath over the base's, given the area Jacobian ``j_area`` at y_{b+1}: J in
+    the solid angle at y_b, y_b's value and density towards the offset chain, every delta lobe at
+    the offset's angles. Returns (ok, (f'/f per channel) J_w, (p'/p) J_w, the arrival direction at y'_s)."""
+    x1 = (X[0, 0], X[0, 1], X[0, 2])
+    x1o = (Xo[0, 0], Xo[0, 1], Xo[0, 2])
+    n1 = (lp.nrm[rows[k - 1], 0], lp.nrm[rows[k - 1], 1], lp.nrm[rows[k - 1], 2])
+    d1, l1 = _dir(yb, x1)
+    d1o, l1o = _dir(yb, x1o)
+    c1 = abs(dot(d1, n1))
+    c1o = abs(dot(d1o, (nrm_o[0, 0], nrm_o[0, 1], nrm_o[0, 2])))
+    if not (c1 > 0.0 and c1o > 0.0):
+        return False, _ZERO, 0.0, _ZERO
+    j_w = j_area * (c1o / (l1o * l1o)) / (c1 / (l1 * l1))
+    status, fr, pr = parent_factor(sa, lp, b, rows[k - 1], d1o)
+    if status != 0:
+        return False, _ZERO, 0.0, _ZERO
+    f0, f1, f2, pp = fr[0] * j_w, fr[1] * j_w, fr[2] * j_w, pr * j_w
+    w_in_b, w_in_o = d1, d1o
+    for j in range(k):
+        row = rows[k - 1 - j]
+        mat = sa.materials[lp.obj[row]]
+        ns_b = (lp.nsh[row, 0], lp.nsh[row, 1], lp.nsh[row, 2])
+        nxt_b = ys if j == k - 1 else (X[j + 1, 0], X[j + 1, 1], X[j + 1, 2])
+        nxt_o = ye if j == k - 1 else (Xo[j + 1, 0], Xo[j + 1, 1], Xo[j + 1, 2])
+        ns_o = (nrm_o[j, 3], nrm_o[j, 4], nrm_o[j, 5])
+        out_b, _ = _dir((X[j, 0], X[j, 1], X[j, 2]), nxt_b)
+        out_o, _ = _dir((Xo[j, 0], Xo[j, 1], Xo[j, 2]), nxt_o)
+        fb, pb, okb = _delta_value(mat, ns_b, w_in_b, out_b, not refr[j])
+        fo, po, oko = _delta_value(mat, ns_o, w_in_o, out_o, not refr[j])
+        if not (okb and oko and pb > 0.0):
+            return False, _ZERO, 0.0, _ZERO
+        if (fb[0] > 0.0) != (fo[0] > 0.0) or (fb[1] > 0.0) != (fo[1] > 0.0) or (fb[2] > 0.0) != (fo[2] > 0.0):
+            return False, _ZERO, 0.0, _ZERO
+        f0 *= fo[0] / fb[0] if fb[0] > 0.0 else 0.0
+        f1 *= fo[1] / fb[1] if fb[1] > 0.0 else 0.0
+        f2 *= fo[2] / fb[2] if fb[2] > 0.0 else 0.0
+        pp *= po / pb
+        w_in_b, w_in_o = out_b, out_o
+    return True, (f0, f1, f2), pp, w_in_o
+
+
+@block
+def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
+    """Shift the surface photon row v (parent q on a specular chain) to the offset photon near
+    ``ystar`` (normal ``nstar``), the offset gather point at p2 with kernel radius r. Returns (ok,
+    photon power ratio beta'_s / beta_s per channel, MIS density ratio, arrival direction at y'_s)."""
+    rows = np.empty(MAX_CHAIN, dtype=np.int64)
+    k, b = chain_rows(sa, lp, mtab, q, rows)
+    if k == 0:
+        return False, _ZERO, 0.0, _ZERO
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    ns_v = (lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2])
+    # the projection of y* from the base parent (Eq. 6)
+    ok, _, yh, ngh = project(sa, prm, yq, (lp.nrm[q, 0], lp.nrm[q, 1], lp.nrm[q, 2]), ystar, p2, r, stack)
+    # the photon's own inverse shift must give y_s back: with the projection from the *offset's*
+    # parent that holds only when the projection did not move y* (y'_s = y*: Eq. 5 inverts exactly)
+    if not (ok and same_point(yh, ystar, yq, r)):
+        return False, _ZERO, 0.0, _ZERO
+    j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
+    X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
+    yb = yb_of(lp, b)
+    ok, Xo, targets = walk_both_ways(yb, X, ys, ns_v, yh, ngh, shapes, etas, refr, k)
+    if not ok:
+        return False, _ZERO, 0.0, _ZERO
+    ok, det_b, det_o = endpoint_dets(yb, X, ys, ns_v, Xo, yh, ngh, shapes, etas, refr, targets, k)
+    if not (ok and j6 > 0.0):
+        return False, _ZERO, 0.0, _ZERO
+    j_area = det_o * j6 / det_b                     # Eq. 7: |dy'_{b+1} / dy_{b+1}|
+    ok, nrm_o = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
+                                     stack)
+    last = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
+    n_last = (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2])
+    # the last segment reaches y'_s, and (reversibility, Hua et al. 2017 Sec. 4.3) the offset's own
+    # parent sees the base photon
+    if not (ok and reaches(sa, last, n_last, yh, r, stack)[0] and reaches(sa, last, n_last, ys, r, stack)[0]):
+        return False, _ZERO, 0.0, _ZERO
+    return chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, yh, nrm_o, refr, j_area)
+
+
+@block
+def _in_vacuum(lp, rows, k):
+    """Does every segment of the chain y_b -> .. -> y_{s-1} run in vacuum? (The walk carries no
+    transmittance; the last edge y_{s-1} -> b is walked with its media by edge_walk.)"""
+    for j in range(k):
+        if lp.medium[rows[j]] >= 0:
+            return False
+    return True
+
+
+@block
+def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
+    """Shift the volume photon row v, whose parent a = y_{s-1} (``edge``: its recorded edge a -> b,
+    :func:`gdlearn.integrators.photon.gvpm_light.base_edge`) lies on a specular chain, to ``b_off``
+    (module docstring). Returns what gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per
+    channel, light-side density ratio p(b') / p(b), the direction b' is reached along)."""
+    st, q, child, n_null, tau_b, logp_b = edge
+    rows = np.empty(MAX_CHAIN, dtype=np.int64)
+    k, b = chain_rows(sa, lp, mtab, q, rows)
+    if st != OK or k == 0 or not _in_vacuum(lp, rows, k):
+        return FAIL, _ZERO, 0.0, _ZERO
+    ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
+    X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
+    yb = yb_of(lp, b)
+    # each endpoint's chart lies across its own last segment (module docstring); the offset's is
+    # known once the walk has moved y'_{s-1}, so the walk's probes use the base's
+    w_b, _ = _dir(yq, ys)
+    ok, Xo, targets = walk_both_ways(yb, X, ys, w_b, b_off, w_b, shapes, etas, refr, k)
+    if not ok:
+        return FAIL, _ZERO, 0.0, _ZERO
+    a_o = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
+    w_o, l_o = _dir(a_o, b_off)
+    ok, det_b, det_o = endpoint_dets(yb, X, ys, w_b, Xo, b_off, w_o, shapes, etas, refr, targets, k)
+    if not (ok and l_o > 0.0):
+        return FAIL, _ZERO, 0.0, _ZERO
+    ok, nrm_o = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
+                                     stack)
+    if not ok:
+        return FAIL, _ZERO, 0.0, _ZERO
+    # the last edge a' -> b' through the same null interfaces into the same medium, visible throughout
+    n_a = (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2])
+    ok, n_o, tau_o, logp_o, med_o = edge_walk(sa, a_o, offset_origin(a_o, n_a, w_o), w_o, b_off, lp.medium[child],
+                                              stack)
+    if not (ok and n_o == n_null and med_o == lp.medium[v]):
+        return FAIL, _ZERO, 0.0, _ZERO
+    ok, f3, pp, w_in = chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, b_off, nrm_o, refr, det_o / det_b)
+    if not ok:
+        return FAIL, _ZERO, 0.0, _ZERO
+    # T(a', b') / T(a, b) per channel and the tracer's collision densities, as gvpm_light.reconnect_edge
+    f3 = (f3[0] * math.exp(tau_b[0] - tau_o[0]), f3[1] * math.exp(tau_b[1] - tau_o[1]),
+          f3[2] * math.exp(tau_b[2] - tau_o[2]))
+    return OK, f3, pp * math.exp(logp_o - logp_b), w_in
