@@ -7,12 +7,23 @@ median time of a pass after the first, the ratio, the stage split and the photon
 
     flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gbre.py [--scenes scenes/fog-box.xml,...]
         [--kernels 3d,2d] [--res 64] [--photons 20000] [--repeats 3] [--threads 2]
+
+``--kernel``: the camera pass alone, the fast kernel (gbre_gather.gbre_rows) against the one it
+replaced (tests/_gbre_reference.py, kept for tests/test_gbre_fast.py) on the same photons and radius
+(pass 1 after pass 0), interleaved (old, new, old, ...) in one process, ``--repeats`` times per scene
+and kernel (3D: mixed shift; 2D: the ray-frame copy; photon subsets on); prints the median and the
+minimum of each, their ratio, whether the buffers are equal, and the load average before and after.
+
+    flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gbre.py --kernel --res 48 --photons 20000 \
+        --repeats 5
 """
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
+import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -34,6 +45,40 @@ def pass_times(path, kernel, a) -> None:
         print(shift_line(n, last[n]), flush=True)
 
 
+def kernel_times(path, kernel, a) -> None:
+    """Old and new camera pass on the same photons and radius, interleaved (module docstring)."""
+    import numpy as np
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
+    import _gbre_reference as ref
+    from gdlearn.integrators.photon import gbre_gather as gb
+    from gdlearn.integrators.photon import gvpm_gather as gg
+
+    load0 = os.getloadavg()[0]
+    g = make("gbre", load(path, res=a.res), seed=0, photons_per_pass=a.photons, threads=a.threads,
+             transport="media", kernel=kernel)
+    g.compile()
+    g.render_pass(0)
+    lp, bbhs, r, _ = g.build(g.trace_photons(1))
+    kernels = {"old": ref.reference_rows, "new": gb.gbre_rows}
+    times = {n: [] for n in kernels}
+    outs = {}
+    for i in range(a.repeats + 1):
+        for n, rows in kernels.items():
+            out = gg.allocate(g.height, g.width)
+            t0 = time.perf_counter()
+            with g.setup.parallel(g.height):
+                rows(g.setup.sa, lp, bbhs, float(r), g.gather_params, g.gp, g.wsub, g.seed, 2, out)
+            if i > 0:                       # the first round compiles the reference kernel
+                times[n].append(time.perf_counter() - t0)
+            outs[n] = out
+    same = all(np.array_equal(x, y) for x, y in zip(outs["old"], outs["new"]))
+    med = {n: statistics.median(v) for n, v in times.items()}
+    print(f"{os.path.basename(path):18s} {kernel} kernel old {med['old']:6.3f} s (min {min(times['old']):.3f})  new "
+          f"{med['new']:6.3f} s (min {min(times['new']):.3f})  old/new {med['old'] / med['new']:5.2f}  "
+          f"array-equal {same}  load average {load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", default=SCENES)
@@ -42,10 +87,11 @@ def main(argv=None) -> int:
     p.add_argument("--photons", type=int, default=20_000)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--kernel", action="store_true", help="old vs new camera pass alone (module docstring)")
     a = p.parse_args(argv)
     for path in a.scenes.split(","):
         for kernel in a.kernels.split(","):
-            pass_times(path, kernel, a)
+            (kernel_times if a.kernel else pass_times)(path, kernel, a)
     return 0
 
 

@@ -17,8 +17,11 @@ seeds interleaved seed by seed, all at ``--threads`` threads. The reference is a
 rendered once and cached on disk under the benchmark's own folder (``$GDLEARN_CACHE`` or
 ``~/.cache/gdlearn``, then ``bench_gvpm/``), keyed by the scene, the resolution, the budget and the
 sources of VPM's pipeline (so an edit of the G-VPM kernels keeps it, an edit of VPM's does not).
-Prints each method's final relMSE per seed, the ratio vpm / method (> 1: lower error than VPM),
-its mean, min and max over the seeds, and the same with the reference's noise floor subtracted
+``--methods`` picks others, the first the ratios' base: G-BRE's study is ``--methods
+bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-frame copy; photon
+subsets on; bre-2d is there too). Prints each method's final relMSE per seed, the ratio base /
+method (> 1: lower error than the base), its mean, min and max over the seeds, and the same with
+the reference's noise floor subtracted
 from both errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R).
 The methods' order rotates from seed to seed. ``--refs-only`` renders (and caches) the references
 and stops: keep each locked run under a few minutes by rendering the references, then each scene
@@ -65,7 +68,7 @@ def interleaved_times(integs: dict, repeats: int):
 def shift_line(name: str, res) -> str:
     """The stage split and photon-shift statistics of a gradient pass (per gathered photon and neighbour)."""
     st = res.stats
-    c = {k: st[f"photon_shifts_{k}"] for k in KINDS}
+    c = {k: st.get(f"photon_shifts_{k}", 0) for k in KINDS}
     tot = max(c["null"] + c["reconnected"] + c["failed"] + c["manifold"], 1)
     stage = {k: res.timings.get(k, 0.0) for k in ("photons", "build", "gather")}
     return (f"    {name:12s} stages: light paths {stage['photons']:.3f} s, build {stage['build']:.3f} s, gather "
@@ -131,19 +134,24 @@ def vpm_reference(path, a):
 
 
 def equal_time_study(a) -> int:
-    """vpm vs gvpm+l1, gvpm+l2 and bre-3d at equal time (module docstring)."""
+    """vpm vs gvpm+l1, gvpm+l2 and bre-3d at equal time, or any ``--methods`` against the first
+    (module docstring)."""
     import numpy as np
 
     from gdlearn.experiments import SceneFile, equal_time
     from gdlearn.experiments.study import Method
 
     opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("transport", "media"))
+    k3, k2 = (("kernel", "3d"),), (("kernel", "2d"),)
     every = {"vpm": Method("vpm", "vpm", None, opts), "gvpm+l1": Method("gvpm+l1", "gvpm", "l1", opts),
              "gvpm+l2": Method("gvpm+l2", "gvpm", "l2", opts),
-             "bre-3d": Method("bre-3d", "bre", None, opts + (("kernel", "3d"),))}
+             "bre-3d": Method("bre-3d", "bre", None, opts + k3), "bre-2d": Method("bre-2d", "bre", None, opts + k2),
+             "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
+             "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
     names = a.methods.split(",")
-    if names[0] != "vpm" or any(n not in every for n in names):
-        raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)}, vpm first (the ratios' base)")
+    if any(n not in every for n in names):
+        raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)}; the first is the ratios' base")
+    base_name = names[0]
     print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
           f"pass, {a.threads} threads, transport media; load average {os.getloadavg()[0]:.2f} on "
           f"{os.cpu_count()} cores", flush=True)
@@ -166,7 +174,7 @@ def equal_time_study(a) -> int:
                 rec = st.select(True, method=m, seed=seed)[0]
                 err[m].append(rec["relmse"])
                 passes[m].append(rec["passes"])
-        base = np.array(err["vpm"])
+        base = np.array(err[base_name])
         for m in names:
             e = np.array(err[m])
             ratio = base / e
@@ -176,7 +184,7 @@ def equal_time_study(a) -> int:
             less = (f"mean {clean.mean():.2f}, min {clean.min():.2f}, max {clean.max():.2f} ({ok.sum()} seeds)"
                     if ok.any() else "n/a (an error under the floor)")
             print(f"  {m:8s} relMSE {e.mean():.3e} (seeds: {', '.join(f'{x:.3e}' for x in e)}; passes "
-                  f"{', '.join(str(p) for p in passes[m])})  vpm / {m}: mean {ratio.mean():.2f}, min "
+                  f"{', '.join(str(p) for p in passes[m])})  {base_name} / {m}: mean {ratio.mean():.2f}, min "
                   f"{ratio.min():.2f}, max {ratio.max():.2f}; less the floor: {less}", flush=True)
         print(f"  load average {os.getloadavg()[0]:.2f}", flush=True)
     return 0
@@ -193,7 +201,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1 (split a "
                                                              "study into locked runs of a few minutes)")
-    p.add_argument("--methods", default="vpm,gvpm+l1,gvpm+l2,bre-3d", help="of --equal-time; vpm first")
+    p.add_argument("--methods", default="vpm,gvpm+l1,gvpm+l2,bre-3d",
+                   help="of --equal-time, the first the ratios' base (G-BRE's study: bre-3d,gbre+l1,gbre-2d+l1)")
     p.add_argument("--ref-passes", type=int, default=64, help="passes of the vpm reference")
     p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
     p.add_argument("--refs-only", action="store_true")

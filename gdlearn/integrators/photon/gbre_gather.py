@@ -27,7 +27,7 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
      different rays overlap in a null set. The MIS ratio is the light side's alone (t is no
      random variable of a 2D query).
 
-   Reconnections go through :func:`gdlearn.integrators.photon.gvpm_light.reconnect` (visibility
+   Reconnections go through :func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge` (visibility
    over the whole segment, null interfaces crossed as the base edge did).
 5. **Photon subsets** (Sec. 6.1, PHOTONS.md Sec. 5.10, ``subsets``): pixel (x, y) of parity
    g = (x + y) mod 2 gathers, for its base *and* its shifts, only the photons of light paths whose
@@ -35,6 +35,15 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    even count). Neighbours have opposite parities, so the forward shift of a pair uses one subset
    and the backward shift the other; both are unbiased for the same integral, and the MIS weights
    are functions of the paths alone, so they stay complementary.
+
+Organisation (for speed; benchmarks/README.md, G-BRE section), G-VPM's recipe
+(:mod:`gdlearn.integrators.photon.gvpm_gather`): a photon's recorded edge a -> b
+(``gvpm_light.base_edge``) is walked at most once for its four neighbours, and only if one of them
+reconnects; a pixel half's L, D_k, S_k and shift counts are summed in a row scratch in photon order
+(beam by beam, photon by photon, neighbour by neighbour: each buffer sees the same additions in the
+same order as one write per term) and written once; the per-photon helpers are inlined. The
+buffers are bit for bit those of the straightforward kernel (tests/test_gbre_fast.py against
+tests/_gbre_reference.py).
 
 Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
 kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed.
@@ -50,7 +59,7 @@ from numba import prange
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.jit import block, inlined, rows
 from gdlearn.kernels.media.medium import medium_params, transmittance
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.kernels.rng import path_state, rand_at
@@ -58,9 +67,10 @@ from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
-from gdlearn.integrators.photon.photon_shift_loop import finite3, put
+from gdlearn.integrators.photon.photon_shift_loop import finite3
 from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_path
-from gdlearn.integrators.photon.gvpm_light import OK, reconnect
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
+    reconnect_edge, store_edge
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -74,30 +84,67 @@ class GbreParams(NamedTuple):
     subsets: bool         # photon subsets on a checkerboard (module docstring, item 5)
 
 
+class Scratch(NamedTuple):
+    """A row's scratch arrays, allocated once per row (numba would allocate them per call otherwise)."""
+    buf: np.ndarray       # the hierarchy's candidates (as many as it has photons)
+    oa: np.ndarray        # (3,): the current beam's origin, as an array for bbh.collect
+    da: np.ndarray        # (3,): its direction
+    acc: np.ndarray       # (9, 3): the pixel half's L, D_k, S_k, summed in photon order, written once
+    cnt: np.ndarray       # (4,) int64: its shift counts null / mixed / reconnected / failed
+    edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
+
+
 _ZERO = (0.0, 0.0, 0.0)
 _ONE = (1.0, 1.0, 1.0)
 
 
-@block
+@inlined
 def _along(o, d, t):
     return (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+
+
+@inlined
+def _place_3d(lp, v, o, d, o_off, d_off, t, s_off, r, half, mixed):
+    """Where G-BRE-3D puts photon row v (gathered at d = o + t d, chord half-length ``half`` on the
+    base beam) for the offset beam (o', d', length s'): (ok, kind, b', half, half'), half' the offset
+    beam's chord through b' -- the MIS ratio's offset chord density 1 / (2 half'). Module docstring,
+    item 4: the camera distance copy (Eq. 14-15), the mixed (Eq. 16) or simple shift relative to
+    (d, d'), and the null criterion |d' - b'| < r of Sec. 5.6."""
+    if not camera_distance_copy(t, s_off)[0]:
+        return False, NULL, _ZERO, half, 0.0
+    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    dg, dp = _along(o, d, t), _along(o_off, d_off, t)
+    b2, kind = photon_shift(b, dg, dp, r, mixed)
+    e = (b2[0] - dp[0], b2[1] - dp[1], b2[2] - dp[2])
+    half2 = chord_half(r, bbh_mod.perp(o_off, d_off, b2)[1])
+    if not (e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r and half2 > 0.0 and half > 0.0):
+        return False, kind, b2, half, half2       # b' on K''s boundary: a null set, its reverse weighs 0
+    return True, kind, b2, half, half2
+
+
+@inlined
+def _place_2d(lp, v, o, d, o_off, d_off, t, s_off):
+    """Where G-BRE-2D puts photon row v (its projection on the base beam at t): the ray-frame copy
+    (``|J| = 1``, the same kernel value at d'), as :func:`_place_3d`'s tuple with both chord lengths 1
+    (t is no random variable of a 2D query, so the camera side adds nothing to the MIS ratio)."""
+    if not camera_distance_copy(t, s_off)[0]:
+        return False, TRANSLATED, _ZERO, 1.0, 1.0
+    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    ok, b2 = ray_frame_copy(b, _along(o, d, t), d, _along(o_off, d_off, t), d_off)
+    return ok, TRANSLATED, b2, 1.0, 1.0
 
 
 @block
 def shift_3d(sa, lp, v, o, d, o_off, d_off, t, s_off, r, mixed, stack):
     """G-BRE-3D's shift of photon row v gathered at d = o + t d on the base beam, to the offset beam
     (o', d', length s'): (ok, kind, beta_b' / beta_b per channel, offset over base density ratio
-    of Eq. 19, the direction the offset photon arrives along). Module docstring, item 4."""
-    if not camera_distance_copy(t, s_off)[0]:
-        return False, NULL, _ONE, 0.0, _ZERO
-    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-    dg, dp = _along(o, d, t), _along(o_off, d_off, t)
-    half = chord_half(r, bbh_mod.perp(o, d, b)[1])
-    b2, kind = photon_shift(b, dg, dp, r, mixed)
-    e = (b2[0] - dp[0], b2[1] - dp[1], b2[2] - dp[2])
-    half2 = chord_half(r, bbh_mod.perp(o_off, d_off, b2)[1])
-    if not (e[0] * e[0] + e[1] * e[1] + e[2] * e[2] < r * r and half2 > 0.0 and half > 0.0):
-        return False, kind, _ONE, 0.0, _ZERO       # b' on K''s boundary: a null set, its reverse weighs 0
+    of Eq. 19, the direction the offset photon arrives along). Module docstring, item 4. (The
+    camera pass does the same through :func:`_place_3d` and :func:`_light_side`, the recorded edge
+    shared by the neighbours; this is its one-photon form, for tests/test_gbre.py.)"""
+    half = chord_half(r, bbh_mod.perp(o, d, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))[1])
+    ok, kind, b2, half, half2 = _place_3d(lp, v, o, d, o_off, d_off, t, s_off, r, half, mixed)
+    if not ok:
+        return False, kind, _ONE, 0.0, _ZERO
     if kind == NULL:
         return True, kind, _ONE, half / half2, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
     status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
@@ -110,10 +157,7 @@ def shift_3d(sa, lp, v, o, d, o_off, d_off, t, s_off, r, mixed, stack):
 def shift_2d(sa, lp, v, o, d, o_off, d_off, t, s_off, stack):
     """G-BRE-2D's shift of photon row v (its projection on the base beam at t) by the ray-frame copy,
     then the reconnection from its parent; returns as :func:`shift_3d` (kind TRANSLATED)."""
-    if not camera_distance_copy(t, s_off)[0]:
-        return False, TRANSLATED, _ONE, 0.0, _ZERO
-    b = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-    ok, b2 = ray_frame_copy(b, _along(o, d, t), d, _along(o_off, d_off, t), d_off)
+    ok, kind, b2, _, _ = _place_2d(lp, v, o, d, o_off, d_off, t, s_off)
     if not ok:
         return False, TRANSLATED, _ONE, 0.0, _ZERO
     status, f3, rl, w_in = reconnect(sa, lp, v, b2, stack)
@@ -141,18 +185,29 @@ def _gbre_rows(sa, lp, b00, b01, b10, b11, r, prm, gp, wsub, seed, sample0, out)
 
 @block
 def _row(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y):
-    hgt, w = out.m.shape[1], out.m.shape[2]
-    nbad = 0
-    stack = np.empty(STACK_SIZE, dtype=np.int32)
-    beams = np.empty((MAX_BEAMS, BEAM_COLS))
-    bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
-    obeams = np.empty((4, MAX_BEAMS, BEAM_COLS))
-    obstate = np.empty((4, MAX_BEAMS, 2), dtype=np.int64)
-    o_ok = np.zeros(4, dtype=np.bool_)
+    """Row y's scratch, allocated once, and the row's pixels (:func:`_pixels`)."""
     nmax = 1
     for i in range(4):
         nmax = max(nmax, bbhs[i].order.shape[0])
-    buf = np.empty(nmax, dtype=np.int64)
+    work = (np.empty(STACK_SIZE, dtype=np.int32), np.empty((MAX_BEAMS, BEAM_COLS)),
+            np.empty((MAX_BEAMS, 2), dtype=np.int64), np.empty((4, MAX_BEAMS, BEAM_COLS)),
+            np.empty((4, MAX_BEAMS, 2), dtype=np.int64), np.zeros(4, dtype=np.bool_))
+    scr = Scratch(np.empty(nmax, dtype=np.int64), np.empty(3), np.empty(3), np.empty((9, 3)),
+                  np.empty(4, dtype=np.int64), np.empty((1, EDGE_COLS)))
+    return _pixels(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
+
+
+@block
+def _pixels(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y, work, scr):
+    """Every pixel of row y, with the row's scratch borrowed (kernels/arrays.py: no reference count;
+    :func:`_row`'s arrays outlive this call). Counted, every inlined helper that receives an array
+    increments and decrements its count atomically: ~30 % of the fog box's pass (perf, 48^2)."""
+    hgt, w = out.m.shape[1], out.m.shape[2]
+    nbad = 0
+    stack, beams, bstate = borrow(work[0]), borrow(work[1]), borrow(work[2])
+    obeams, obstate, o_ok = borrow(work[3]), borrow(work[4]), borrow(work[5])
+    scr = Scratch(borrow(scr.buf), borrow(scr.oa), borrow(scr.da), borrow(scr.acc), borrow(scr.cnt),
+                  borrow(scr.edge))
     for x in range(w):
         par = (x + y) & 1 if gp.subsets else 0
         for hh in range(2):
@@ -166,38 +221,58 @@ def _row(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y):
             for k in range(4):
                 o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
                                        beams, bstate, nb, obeams[k], obstate[k])
+            _load_sums(out, hh, y, x, scr)
             cnt = 0
             for b in range(nb):
                 c, bad = _beam(sa, lp, bbhs[2 * hh + par], prm, gp, h, (beams, bstate, b), (obeams, o_ok), r,
-                               wsub[hh, par], buf, stack, out, hh, y, x)
+                               wsub[hh, par], scr, stack)
                 cnt += c
                 nbad += bad
+            _store_sums(out, hh, y, x, scr)
             out.m[hh, y, x] = cnt
     return nbad
 
 
+@inlined
+def _load_sums(out, hh, y, x, scr):
+    """Start the pixel half's sums where its buffers are (zero: each pixel half is written once)."""
+    for i in range(9):
+        for c in range(3):
+            scr.acc[i, c] = out.phi[hh, i, y, x, c]
+    for i in range(4):
+        scr.cnt[i] = 0
+
+
+@inlined
+def _store_sums(out, hh, y, x, scr):
+    for i in range(9):
+        for c in range(3):
+            out.phi[hh, i, y, x, c] = scr.acc[i, c]
+    for i in range(4):
+        out.count[hh, i, y, x] += scr.cnt[i]
+
+
 @block
-def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, buf, stack, out, hh, y, x):
+def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, scr, stack):
     """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
-    shifts: (photons counted, non-finite terms dropped)."""
+    shifts, into the pixel half's sums: (photons counted, non-finite terms dropped)."""
     beams, bstate, b = base
     med = int(beams[b, BEAM_MED])
     sig, alb, g = medium_params(sa.media[med])
-    oa = np.empty(3)
-    da = np.empty(3)
     for c in range(3):
-        oa[c] = beams[b, BEAM_O + c]
-        da[c] = beams[b, BEAM_D + c]
-    o = (oa[0], oa[1], oa[2])
-    d = (da[0], da[1], da[2])
+        scr.oa[c] = beams[b, BEAM_O + c]
+        scr.da[c] = beams[b, BEAM_D + c]
+    o = (scr.oa[0], scr.oa[1], scr.oa[2])
+    d = (scr.da[0], scr.da[1], scr.da[2])
     s = beams[b, BEAM_S]
     m = int(bstate[b, 1])
     state = bstate[b, 0]
-    n = bbh_mod.collect(bbh, oa, da, s, gp.kernel, buf)
+    n = bbh_mod.collect(bbh, scr.oa, scr.da, s, gp.kernel, scr.buf)
+    acc = scr.acc
     cnt = 0
     nbad = 0
-    for i in range(min(n, buf.shape[0])):
-        v = buf[i]
+    for i in range(min(n, scr.buf.shape[0])):
+        v = scr.buf[i]
         if not _admit(lp, v, prm, med, m, state):
             continue
         tp, dp2 = bbh_mod.perp(o, d, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))
@@ -213,51 +288,77 @@ def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, buf, stack, out, hh, y, x)
         if not finite3(c_b):
             nbad += 1
             continue
-        put(out.phi, hh, 0, y, x, c_b, 1.0)
+        for c in range(3):
+            acc[0, c] += c_b[c]
         pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
-        nbad += _shift_photon(sa, lp, v, gp, g, (o, d, b, t, r), offs, pre, c_b, stack, out, hh, y, x)
+        # the base's chord half-length through v's ball (3D), from the same perp() as the kernel's
+        nbad += _shift_photon(sa, lp, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), offs, pre, c_b, scr, stack)
     return cnt, nbad
 
 
-@block
-def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, stack, out, hh, y, x):
-    """Photon row v (base term c_b; ``pre`` = T(t) beta kernel weight, per channel) shifted to the
-    four offset beams: D_k, S_k and the counts."""
-    o, d, b, t, r = q
+@inlined
+def _light_side(sa, lp, v, kind, b2, scr, stack):
+    """(ok, beta_b' / beta_b per channel, light-side density ratio, arrival direction at b') of
+    photon row v moved to b': unchanged for a null shift (T(y) = y), else reconnected from its parent
+    with the recorded edge a -> b walked on the first neighbour that needs it and kept in
+    ``scr.edge`` for the others (``gvpm_light.reconnect_edge``: the same arithmetic as ``reconnect``)."""
+    if kind == NULL:
+        return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+    if scr.edge[0, 0] == EDGE_UNKNOWN:
+        store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
+    status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, 0))
+    return status == OK, f3, rl, w_in
+
+
+@inlined
+def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, scr, stack):
+    """Photon row v (base term c_b; ``pre`` = T(t) beta kernel weight, per channel; q = base beam
+    (o, d), its index b, the photon's t, the radius and its chord half-length) shifted to the four
+    offset beams: D_k, S_k and the counts added to the pixel half's sums (scr.acc, scr.cnt) in the
+    order the straightforward kernel wrote them. Returns the non-finite terms dropped."""
+    o, d, b, t, r, half = q
     obeams, o_ok = offs
+    acc, cnt = scr.acc, scr.cnt
+    scr.edge[0, 0] = EDGE_UNKNOWN
     nbad = 0
     for j in range(4):
         ok = o_ok[j]
         kind = NULL
         c_o = _ZERO
         ratio = 0.0
+        f3, rl, w_in = _ONE, 1.0, _ZERO
         if ok:
-            ob = obeams[j]
-            o2 = (ob[b, BEAM_O], ob[b, BEAM_O + 1], ob[b, BEAM_O + 2])
-            d2 = (ob[b, BEAM_D], ob[b, BEAM_D + 1], ob[b, BEAM_D + 2])
+            o2 = (obeams[j, b, BEAM_O], obeams[j, b, BEAM_O + 1], obeams[j, b, BEAM_O + 2])
+            d2 = (obeams[j, b, BEAM_D], obeams[j, b, BEAM_D + 1], obeams[j, b, BEAM_D + 2])
             if gp.kernel == KERNEL_2D:
-                ok, kind, f3, ratio, w_in = shift_2d(sa, lp, v, o, d, o2, d2, t, ob[b, BEAM_S], stack)
+                ok, kind, b2, num, den = _place_2d(lp, v, o, d, o2, d2, t, obeams[j, b, BEAM_S])
             else:
-                ok, kind, f3, ratio, w_in = shift_3d(sa, lp, v, o, d, o2, d2, t, ob[b, BEAM_S], r, gp.mixed, stack)
+                ok, kind, b2, num, den = _place_3d(lp, v, o, d, o2, d2, t, obeams[j, b, BEAM_S], r, half, gp.mixed)
+            if ok:
+                ok, f3, rl, w_in = _light_side(sa, lp, v, kind, b2, scr, stack)
             if ok:
                 # f(T x) |J| / p(x): the offset camera weight, the phase at d' for the (new) arrival
-                # direction, the base's T(t) (same t, same medium) and the base's kernel density
+                # direction, the base's T(t) (same t, same medium) and the base's kernel density;
+                # Eq. 19's ratio: the light side's times (3D) the chord densities [D t / D t']
                 ph = hg_eval(g, d2[0] * w_in[0] + d2[1] * w_in[1] + d2[2] * w_in[2])
-                c_o = (ob[b, BEAM_W] * ph * pre[0] * f3[0], ob[b, BEAM_W + 1] * ph * pre[1] * f3[1],
-                       ob[b, BEAM_W + 2] * ph * pre[2] * f3[2])
+                c_o = (obeams[j, b, BEAM_W] * ph * pre[0] * f3[0], obeams[j, b, BEAM_W + 1] * ph * pre[1] * f3[1],
+                       obeams[j, b, BEAM_W + 2] * ph * pre[2] * f3[2])
+                ratio = rl * num / den
                 if not (finite3(c_o) and math.isfinite(ratio)):
                     nbad += 1
                     ok = False
                 elif not ratio > 0.0:
                     ok = False
         if not ok:
-            out.count[hh, C_FAILED, y, x] += 1
-            put(out.phi, hh, 1 + j, y, x, c_b, -1.0)          # w = 1, no offset (PHOTONS.md Sec. 0.2)
+            cnt[C_FAILED] += 1
+            for c in range(3):
+                acc[1 + j, c] += -1.0 * c_b[c]               # w = 1, no offset (PHOTONS.md Sec. 0.2)
             continue
-        out.count[hh, C_NULL if kind == NULL else C_RECONNECTED, y, x] += 1
+        cnt[C_NULL if kind == NULL else C_RECONNECTED] += 1
         if kind == REFLECTED:
-            out.count[hh, C_MIXED, y, x] += 1
+            cnt[C_MIXED] += 1
         wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic
-        put(out.phi, hh, 1 + j, y, x, (c_o[0] - c_b[0], c_o[1] - c_b[1], c_o[2] - c_b[2]), wgt)
-        put(out.phi, hh, 5 + j, y, x, c_o, wgt)
+        for c in range(3):
+            acc[1 + j, c] += wgt * (c_o[c] - c_b[c])
+            acc[5 + j, c] += wgt * c_o[c]
     return nbad
