@@ -60,7 +60,8 @@ def kernel_times(path, kernel, a) -> None:
     g.compile()
     g.render_pass(0)
     lp, bbhs, r, _ = g.build(g.trace_photons(1))
-    kernels = {"old": ref.reference_rows, "new": gb.gbre_rows}
+    kernels = {"old": lambda sa, lp, bbhs, *rest: ref.reference_rows(sa, lp, bbhs, *rest),
+               "new": lambda sa, lp, bbhs, *rest: gb.gbre_rows(sa, lp, bbhs, g.mtab, *rest)}
     times = {n: [] for n in kernels}
     outs = {}
     for i in range(a.repeats + 1):

@@ -15,7 +15,8 @@ The frame carries, like ``gvpm``'s, ``primal`` (the MIS-weighted one with the of
 :func:`gdlearn.integrators.gradients.mis_primal`), ``primal_base`` (the BRE's own estimate -- bit
 for bit the same photons, kernels and chord points when ``subsets=False``), ``gx``, ``gy`` for the
 reconstructions (``--recon``), and the shift counts ``shift_null``, ``shift_mixed``,
-``shift_reconnected``, ``shift_failed`` per camera sample (the mean of the passes, as every image).
+``shift_reconnected``, ``shift_failed``, ``shift_manifold`` (walked through a specular chain) per
+camera sample (the mean of the passes, as every image).
 
 ``subsets=True`` (default, as the paper's code; PHOTONS.md Sec. 5.10): a pixel of parity
 (x + y) mod 2 gathers only the photons of light paths of that parity, weighted up, for its base and
@@ -56,7 +57,7 @@ from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
-COUNTS = ("null", "mixed", "reconnected", "failed")
+COUNTS = ("null", "mixed", "reconnected", "failed", "manifold")     # gvpm_gather.C_*
 
 
 def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
@@ -99,12 +100,12 @@ class GBRE(BRE):
         self.shift, self.subsets = shift, bool(subsets)
         self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets)
         self.wsub = subset_weights(self.n_half, self.subsets)
-        self.mtab = manifold_table(scene, self.setup.sa) if self.vparams.surfaces else None
+        self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 
     def _gbre(self, lp, bbhs, r, sample0, h, w):
         out = gg.allocate(h, w)
         with self.setup.parallel(h):
-            gb.gbre_rows(self.setup.sa, lp, bbhs, float(r), self.gather_params, self.gp, self.wsub, self.seed,
+            gb.gbre_rows(self.setup.sa, lp, bbhs, self.mtab, float(r), self.gather_params, self.gp, self.wsub, self.seed,
                          sample0, out)
         return out
 

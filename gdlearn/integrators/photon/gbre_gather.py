@@ -28,7 +28,9 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
      random variable of a 2D query).
 
    Reconnections go through :func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge` (visibility
-   over the whole segment, null interfaces crossed as the base edge did).
+   over the whole segment, null interfaces crossed as the base edge did); a photon whose parent is
+   specular is completed by the manifold walk instead (Sec. 4.3,
+   :func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`), as G-VPM's.
 5. **Photon subsets** (Sec. 6.1, PHOTONS.md Sec. 5.10, ``subsets``): pixel (x, y) of parity
    g = (x + y) mod 2 gathers, for its base *and* its shifts, only the photons of light paths whose
    index has parity g, weighted by ``wsub[hh, g]`` (the half's path count over the subset's: 2 for an
@@ -46,7 +48,8 @@ buffers are bit for bit those of the straightforward kernel (tests/test_gbre_fas
 tests/_gbre_reference.py).
 
 Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
-kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed.
+kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed /
+manifold (walked).
 """
 from __future__ import annotations
 
@@ -68,9 +71,11 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.photon_shift_loop import finite3
-from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MIXED, C_NULL, C_RECONNECTED, GvpmOut, _offset_path
-from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
-    reconnect_edge, store_edge
+from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED, C_NULL, C_RECONNECTED, N_COUNTS, \
+    GvpmOut, _offset_path
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, FAIL_SPECULAR, OK, base_edge, load_edge, \
+    reconnect, reconnect_edge, store_edge
+from gdlearn.integrators.photon.photon_manifold import manifold_volume_photon
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -90,7 +95,7 @@ class Scratch(NamedTuple):
     oa: np.ndarray        # (3,): the current beam's origin, as an array for bbh.collect
     da: np.ndarray        # (3,): its direction
     acc: np.ndarray       # (9, 3): the pixel half's L, D_k, S_k, summed in photon order, written once
-    cnt: np.ndarray       # (4,) int64: its shift counts null / mixed / reconnected / failed
+    cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts null / mixed / reconnected / failed / manifold
     edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
 
 
@@ -167,24 +172,25 @@ def shift_2d(sa, lp, v, o, d, o_off, d_off, t, s_off, stack):
 
 
 @block
-def gbre_rows(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out):
+def gbre_rows(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out):
     """Every pixel's two camera samples (sample0 + hh) and their four shifts into ``out`` (a
     :class:`~gdlearn.integrators.photon.gvpm_gather.GvpmOut`); ``bbhs`` holds four hierarchies, (half 0, parity 0), (0, 1), (1, 0), (1, 1)
     -- without subsets each half's twice --, ``r`` is the pass's global radius, ``wsub`` (2 x 2) the
-    subset weights per half and parity."""
-    _gbre_rows(borrowed(sa), _borrow_rec(lp), bbhs[0], bbhs[1], bbhs[2], bbhs[3], r, prm, gp, wsub, seed, sample0,
+    subset weights per half and parity, ``mtab`` the specular shapes the manifold walk moves
+    (``gpt_surface.manifold.manifold_table``)."""
+    _gbre_rows(borrowed(sa), _borrow_rec(lp), bbhs[0], bbhs[1], bbhs[2], bbhs[3], mtab, r, prm, gp, wsub, seed, sample0,
                GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
 
 
 @rows
-def _gbre_rows(sa, lp, b00, b01, b10, b11, r, prm, gp, wsub, seed, sample0, out):
+def _gbre_rows(sa, lp, b00, b01, b10, b11, mtab, r, prm, gp, wsub, seed, sample0, out):
     for row in prange(out.bad.shape[0]):
         y = np.int64(row)
-        out.bad[y] = _row(sa, lp, (b00, b01, b10, b11), r, prm, gp, wsub, seed, sample0, out, y)
+        out.bad[y] = _row(sa, lp, (b00, b01, b10, b11), mtab, r, prm, gp, wsub, seed, sample0, out, y)
 
 
 @block
-def _row(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y):
+def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
     """Row y's scratch, allocated once, and the row's pixels (:func:`_pixels`)."""
     nmax = 1
     for i in range(4):
@@ -193,12 +199,12 @@ def _row(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y):
             np.empty((MAX_BEAMS, 2), dtype=np.int64), np.empty((4, MAX_BEAMS, BEAM_COLS)),
             np.empty((4, MAX_BEAMS, 2), dtype=np.int64), np.zeros(4, dtype=np.bool_))
     scr = Scratch(np.empty(nmax, dtype=np.int64), np.empty(3), np.empty(3), np.empty((9, 3)),
-                  np.empty(4, dtype=np.int64), np.empty((1, EDGE_COLS)))
-    return _pixels(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
+                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)))
+    return _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
 
 
 @block
-def _pixels(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y, work, scr):
+def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr):
     """Every pixel of row y, with the row's scratch borrowed (kernels/arrays.py: no reference count;
     :func:`_row`'s arrays outlive this call). Counted, every inlined helper that receives an array
     increments and decrements its count atomically: ~30 % of the fog box's pass (perf, 48^2)."""
@@ -224,7 +230,7 @@ def _pixels(sa, lp, bbhs, r, prm, gp, wsub, seed, sample0, out, y, work, scr):
             _load_sums(out, hh, y, x, scr)
             cnt = 0
             for b in range(nb):
-                c, bad = _beam(sa, lp, bbhs[2 * hh + par], prm, gp, h, (beams, bstate, b), (obeams, o_ok), r,
+                c, bad = _beam(sa, lp, bbhs[2 * hh + par], mtab, prm, gp, h, (beams, bstate, b), (obeams, o_ok), r,
                                wsub[hh, par], scr, stack)
                 cnt += c
                 nbad += bad
@@ -239,7 +245,7 @@ def _load_sums(out, hh, y, x, scr):
     for i in range(9):
         for c in range(3):
             scr.acc[i, c] = out.phi[hh, i, y, x, c]
-    for i in range(4):
+    for i in range(N_COUNTS):
         scr.cnt[i] = 0
 
 
@@ -248,12 +254,12 @@ def _store_sums(out, hh, y, x, scr):
     for i in range(9):
         for c in range(3):
             out.phi[hh, i, y, x, c] = scr.acc[i, c]
-    for i in range(4):
+    for i in range(N_COUNTS):
         out.count[hh, i, y, x] += scr.cnt[i]
 
 
 @block
-def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, scr, stack):
+def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, r, ws, scr, stack):
     """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
     shifts, into the pixel half's sums: (photons counted, non-finite terms dropped)."""
     beams, bstate, b = base
@@ -292,26 +298,32 @@ def _beam(sa, lp, bbh, prm, gp, h, base, offs, r, ws, scr, stack):
             acc[0, c] += c_b[c]
         pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
         # the base's chord half-length through v's ball (3D), from the same perp() as the kernel's
-        nbad += _shift_photon(sa, lp, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), offs, pre, c_b, scr, stack)
+        nbad += _shift_photon(sa, lp, mtab, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), offs, pre, c_b, scr,
+                              stack)
     return cnt, nbad
 
 
 @inlined
-def _light_side(sa, lp, v, kind, b2, scr, stack):
-    """(ok, beta_b' / beta_b per channel, light-side density ratio, arrival direction at b') of
-    photon row v moved to b': unchanged for a null shift (T(y) = y), else reconnected from its parent
-    with the recorded edge a -> b walked on the first neighbour that needs it and kept in
-    ``scr.edge`` for the others (``gvpm_light.reconnect_edge``: the same arithmetic as ``reconnect``)."""
+def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack):
+    """(ok, beta_b' / beta_b per channel, light-side density ratio, arrival direction at b', walked)
+    of photon row v moved to b': unchanged for a null shift (T(y) = y), else reconnected from its
+    parent with the recorded edge a -> b walked on the first neighbour that needs it and kept in
+    ``scr.edge`` for the others (``gvpm_light.reconnect_edge``: the same arithmetic as ``reconnect``),
+    or -- a specular parent -- completed by the manifold walk (Gruson et al. 2018 Sec. 4.3,
+    :func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`)."""
     if kind == NULL:
-        return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+        return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]), False
     if scr.edge[0, 0] == EDGE_UNKNOWN:
         store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
     status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, 0))
-    return status == OK, f3, rl, w_in
+    if status == FAIL_SPECULAR:
+        status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack)
+        return status == OK, f3, rl, w_in, True
+    return status == OK, f3, rl, w_in, False
 
 
 @inlined
-def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, scr, stack):
+def _shift_photon(sa, lp, mtab, v, gp, g, q, offs, pre, c_b, scr, stack):
     """Photon row v (base term c_b; ``pre`` = T(t) beta kernel weight, per channel; q = base beam
     (o, d), its index b, the photon's t, the radius and its chord half-length) shifted to the four
     offset beams: D_k, S_k and the counts added to the pixel half's sums (scr.acc, scr.cnt) in the
@@ -327,6 +339,7 @@ def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, scr, stack):
         c_o = _ZERO
         ratio = 0.0
         f3, rl, w_in = _ONE, 1.0, _ZERO
+        walked = False
         if ok:
             o2 = (obeams[j, b, BEAM_O], obeams[j, b, BEAM_O + 1], obeams[j, b, BEAM_O + 2])
             d2 = (obeams[j, b, BEAM_D], obeams[j, b, BEAM_D + 1], obeams[j, b, BEAM_D + 2])
@@ -335,7 +348,7 @@ def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, scr, stack):
             else:
                 ok, kind, b2, num, den = _place_3d(lp, v, o, d, o2, d2, t, obeams[j, b, BEAM_S], r, half, gp.mixed)
             if ok:
-                ok, f3, rl, w_in = _light_side(sa, lp, v, kind, b2, scr, stack)
+                ok, f3, rl, w_in, walked = _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack)
             if ok:
                 # f(T x) |J| / p(x): the offset camera weight, the phase at d' for the (new) arrival
                 # direction, the base's T(t) (same t, same medium) and the base's kernel density;
@@ -354,7 +367,7 @@ def _shift_photon(sa, lp, v, gp, g, q, offs, pre, c_b, scr, stack):
             for c in range(3):
                 acc[1 + j, c] += -1.0 * c_b[c]               # w = 1, no offset (PHOTONS.md Sec. 0.2)
             continue
-        cnt[C_NULL if kind == NULL else C_RECONNECTED] += 1
+        cnt[C_NULL if kind == NULL else C_MANIFOLD if walked else C_RECONNECTED] += 1
         if kind == REFLECTED:
             cnt[C_MIXED] += 1
         wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic

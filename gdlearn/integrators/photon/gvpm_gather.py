@@ -74,6 +74,7 @@ from gdlearn.shifts.volume_photon import NULL, REFLECTED, camera_distance_copy, 
 #: GvpmOut.count[:, i]: null-shifted, mixed (reflected), reconnected, failed photon shifts, and those
 #: completed by the manifold walk (a specular parent)
 C_NULL, C_MIXED, C_RECONNECTED, C_FAILED, C_MANIFOLD = 0, 1, 2, 3, 4
+N_COUNTS = 5
 
 
 class GvpmParams(NamedTuple):
@@ -98,7 +99,7 @@ class Scratch(NamedTuple):
 
 
 def allocate(h: int, w: int) -> GvpmOut:
-    return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, 5, h, w)), np.zeros(h, np.int64))
+    return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, N_COUNTS, h, w)), np.zeros(h, np.int64))
 
 
 @block
