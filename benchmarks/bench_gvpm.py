@@ -207,6 +207,8 @@ def main(argv=None) -> int:
     p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
     p.add_argument("--refs-only", action="store_true")
     a = p.parse_args(argv)
+    if a.refs_only and a.equal_time is None:
+        p.error("--refs-only renders the references of an equal-time study: give --equal-time S too")
     if a.equal_time is not None:
         return equal_time_study(a)
     for path in a.scenes.split(","):
