@@ -130,7 +130,7 @@ def _place_3d(lp, v, o, d, o_off, d_off, t, s_off, r, half, mixed):
 @inlined
 def _place_2d(lp, v, o, d, o_off, d_off, t, s_off):
     """Where G-BRE-2D puts photon row v (its projection on the base beam at t): the ray-frame copy
-    (``|J| = 1``, the same kernel value at d'), as :func:`_place_3d`'s tuple with both chord lengths 1
+    (``|J| = 1``, the same kernel value at d'), as ``_place_3d``'s tuple with both chord lengths 1
     (t is no random variable of a 2D query, so the camera side adds nothing to the MIS ratio)."""
     if not camera_distance_copy(t, s_off)[0]:
         return False, TRANSLATED, _ZERO, 1.0, 1.0
@@ -144,7 +144,7 @@ def shift_3d(sa, lp, v, o, d, o_off, d_off, t, s_off, r, mixed, stack):
     """G-BRE-3D's shift of photon row v gathered at d = o + t d on the base beam, to the offset beam
     (o', d', length s'): (ok, kind, beta_b' / beta_b per channel, offset over base density ratio
     of Eq. 19, the direction the offset photon arrives along). Module docstring, item 4. (The
-    camera pass does the same through :func:`_place_3d` and :func:`_light_side`, the recorded edge
+    camera pass does the same through ``_place_3d`` and ``_light_side``, the recorded edge
     shared by the neighbours; this is its one-photon form, for tests/test_gbre.py.)"""
     half = chord_half(r, bbh_mod.perp(o, d, (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]))[1])
     ok, kind, b2, half, half2 = _place_3d(lp, v, o, d, o_off, d_off, t, s_off, r, half, mixed)

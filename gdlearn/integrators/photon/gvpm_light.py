@@ -66,7 +66,7 @@ def _parent_ratio(sa, lp, q, v, w_new):
 
 @inlined
 def parent_base_vol(sa, lp, q, v):
-    """The half of :func:`_parent_ratio` that does not depend on the new direction, for photon row v
+    """The half of ``_parent_ratio`` that does not depend on the new direction, for photon row v
     and its parent row q (Gruson et al. 2018, Sec. 4.3: the light subpath up to a is kept): at a
     medium vertex (P_MEDIUM, Mitsuba's wi, the phase function towards the base direction in every
     channel, the HG asymmetry g), else ``gpm_light.parent_base`` (Hua et al. 2017, Sec. 4.2). Once
@@ -82,7 +82,7 @@ def parent_base_vol(sa, lp, q, v):
 
 @inlined
 def parent_offset_vol(sa, lp, q, base, w_new):
-    """:func:`_parent_ratio` towards ``w_new`` from its base half ``base`` (:func:`parent_base_vol`):
+    """``_parent_ratio`` towards ``w_new`` from its base half ``base`` (:func:`parent_base_vol`):
     (status OK | FAIL | FAIL_SPECULAR, value ratio per channel, density ratio)."""
     one = (1.0, 1.0, 1.0)
     kind, wi, fb3, g = base
