@@ -153,6 +153,25 @@ def gradient_residuals(frame):
     return np.stack([gx - fdx, gy - fdy, frame.primal.mean(-1) - pb, gx, fdx])
 
 
+def pass_replicates(integ, passes: int):
+    """Each pass of a fixed-radius run (alpha = 1: every pass an independent estimate of the same
+    blurred image) as a replicate: (passes, 2, H, W) of the pass's own gx - FD_x(base) and
+    gy - FD_y(base), channel means (the frame holds running means, so a pass is p x mean_p -
+    (p - 1) x mean_{p-1}), and the last frame."""
+    import numpy as np
+    reps, prev = [], 0.0
+    for p in range(1, passes + 1):
+        f = integ.step()
+        cur = p * np.stack([f.gx.mean(-1), f.gy.mean(-1), f.images["primal_base"].mean(-1)])
+        one, prev = cur - prev, cur
+        fdx = np.zeros_like(one[2])
+        fdx[:, :-1] = one[2][:, 1:] - one[2][:, :-1]
+        fdy = np.zeros_like(one[2])
+        fdy[:-1] = one[2][1:] - one[2][:-1]
+        reps.append((one[0] - fdx, one[1] - fdy))
+    return np.array(reps), f
+
+
 def render_cli(tmp_path: Path, args: list[str], res: int, buffers: tuple[str, ...]):
     """``gdlearn render ARGS --set res=RES --out img.npy --buffers b``: the image is finite, positive
     and RES x RES, and every named buffer was written (the CLI checks of the gradient photon

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from scipy.optimize import fsolve
 
+from conftest import pass_replicates
 from gdlearn.integrators import make
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.integrators.photon.gpm_light import parent_factor
@@ -268,18 +269,8 @@ def test_gradients_unbiased_at_fixed_radius_per_pass(scene_name):
     probe.render_pass(0)
     g = make("gpm", scene, seed=11, photons_per_pass=50_000, parent="specular",
              radius=probe.pass_state()["mean_radius"], alpha=1.0)
-    reps, prev = [], 0.0
-    for p in range(1, N_PASSES + 1):
-        f = g.step()
-        cur = p * np.stack([f.gx.mean(-1), f.gy.mean(-1), f.images["primal_base"].mean(-1)])
-        one, prev = cur - prev, cur                  # this pass alone (the frame holds running means)
-        fdx = np.zeros_like(one[2])
-        fdx[:, :-1] = one[2][:, 1:] - one[2][:, :-1]
-        fdy = np.zeros_like(one[2])
-        fdy[:-1] = one[2][1:] - one[2][:-1]
-        reps.append((one[0] - fdx, one[1] - fdy))
+    d, f = pass_replicates(g, N_PASSES)
     assert f.stats["photon_shifts_manifold"] > f.stats["photon_shifts_failed"]
-    d = np.array(reps)
     for i, name in enumerate(("gx", "gy")):
         m = d[:, i].mean(0)
         se = d[:, i].std(0, ddof=1) / math.sqrt(N_PASSES)

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import test_gpm_manifold_glass as glass
+from conftest import pass_replicates
 from gdlearn.integrators import make
 from gdlearn.integrators.photon.gpm_light import parent_factor
 from gdlearn.integrators.photon.gvpm_light import OK, base_edge
@@ -166,21 +167,11 @@ def test_gradients_unbiased_on_the_volume_caustic_per_pass(name, kw):
     walked, max |t| 3.1; with the Jacobian dropped 2.45 over all (max |t| 6.8), which fails."""
     scene = load("scenes/volume-caustic.xml", res=32)
     g = make(name, scene, seed=11, photons_per_pass=20_000, volume_radius=0.08, alpha=1.0, transport="media", **kw)
-    reps, prev = [], 0.0
-    for p in range(1, N_PASSES + 1):
-        f = g.step()
-        cur = p * np.stack([f.gx.mean(-1), f.gy.mean(-1), f.images["primal_base"].mean(-1)])
-        one, prev = cur - prev, cur                  # this pass alone (the frame holds running means)
-        fdx = np.zeros_like(one[2])
-        fdx[:, :-1] = one[2][:, 1:] - one[2][:, :-1]
-        fdy = np.zeros_like(one[2])
-        fdy[:-1] = one[2][1:] - one[2][:-1]
-        reps.append((one[0] - fdx, one[1] - fdy))
+    d, f = pass_replicates(g, N_PASSES)
     walked = f.images["shift_manifold"]
     total = sum(f.images[f"shift_{k}"] for k in ("null", "reconnected", "failed", "manifold"))
     cone = walked > 0.3 * walked.max()
     assert cone.sum() > 30 and walked[cone].sum() > 0.1 * total[cone].sum()
-    d = np.array(reps)
     for i, axis in enumerate(("gx", "gy")):
         m = d[:, i].mean(0)
         se = d[:, i].std(0, ddof=1) / math.sqrt(N_PASSES)
