@@ -73,9 +73,9 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED,
 from gdlearn.integrators.photon.photon_shift_loop import finite3
 from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED, C_NULL, C_RECONNECTED, N_COUNTS, \
     GvpmOut, _offset_path
-from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, FAIL_SPECULAR, OK, base_edge, load_edge, \
-    reconnect, reconnect_edge, store_edge
-from gdlearn.integrators.photon.photon_manifold import manifold_volume_photon
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
+    store_edge
+from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -315,11 +315,8 @@ def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack):
         return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]), False
     if scr.edge[0, 0] == EDGE_UNKNOWN:
         store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
-    status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, 0))
-    if status == FAIL_SPECULAR:
-        status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack)
-        return status == OK, f3, rl, w_in, True
-    return status == OK, f3, rl, w_in, False
+    status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack)
+    return status == OK, f3, rl, w_in, walked
 
 
 @inlined

@@ -63,9 +63,8 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
-from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, FAIL_SPECULAR, OK, base_edge, load_edge, \
-    reconnect_edge, store_edge
-from gdlearn.integrators.photon.photon_manifold import manifold_volume_photon
+from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, store_edge
+from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
 from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -317,11 +316,8 @@ def _neighbour(sa, lp, mtab, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, 
             if kind != NULL:
                 if scr.edge[i, 0] == EDGE_UNKNOWN:
                     store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
-                status, f3, rl, w_in = reconnect_edge(sa, lp, v, b2, stack, load_edge(scr.edge, i))
-                if status == FAIL_SPECULAR:                    # Sec. 4.3: the chain above a moves too
-                    status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
-                                                                  stack)
-                    walked = True
+                status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
+                                                                      stack)
                 ok = status == OK
             if ok:
                 ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])

@@ -45,13 +45,13 @@ import numpy as np
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_delta_only
 from gdlearn.kernels.geometry import INFO_EMITTER, offset_origin
-from gdlearn.kernels.jit import block
+from gdlearn.kernels.jit import block, inlined
 from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_SURFACE
 from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row
 from gdlearn.integrators.path.gpt_surface.vertex import same_delta_lobe
 from gdlearn.integrators.photon.gpm_light import _dir, parent_factor, project, reaches, same_point
-from gdlearn.integrators.photon.gvpm_light import FAIL, OK, edge_walk
+from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, OK, edge_walk, reconnect_edge
 from gdlearn.shifts import manifold as M
 from gdlearn.shifts.photon import projection_jacobian
 from gdlearn.shifts.policy import MAX_CHAIN
@@ -272,9 +272,11 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     (module docstring). Returns what gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per
     channel, light-side density ratio p(b') / p(b), the direction b' is reached along)."""
     st, q, child, n_null, tau_b, logp_b = edge
+    if st != OK:                 # the recorded edge itself could not be walked: no densities to compare
+        return FAIL, _ZERO, 0.0, _ZERO
     rows = np.empty(MAX_CHAIN, dtype=np.int64)
     k, b = chain_rows(sa, lp, mtab, q, rows)
-    if st != OK or k == 0 or not _in_vacuum(lp, rows, k):
+    if k == 0 or not _in_vacuum(lp, rows, k):
         return FAIL, _ZERO, 0.0, _ZERO
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
@@ -308,3 +310,17 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     f3 = (f3[0] * math.exp(tau_b[0] - tau_o[0]), f3[1] * math.exp(tau_b[1] - tau_o[1]),
           f3[2] * math.exp(tau_b[2] - tau_o[2]))
     return OK, f3, pp * math.exp(logp_o - logp_b), w_in
+
+
+@inlined
+def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
+    """The light subpath of volume photon row v moved to ``b_off`` (Gruson et al. 2018, Sec. 4.3):
+    reconnected from its parent (:func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge`), or,
+    when the parent is specular, by :func:`manifold_volume_photon`. Returns reconnect_edge's tuple
+    and whether the walk completed it. Inlined: G-VPM's and G-BRE's camera passes call it per photon
+    and neighbour."""
+    status, f3, rl, w_in = reconnect_edge(sa, lp, v, b_off, stack, edge)
+    if status != FAIL_SPECULAR:
+        return status, f3, rl, w_in, False
+    status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack)
+    return status, f3, rl, w_in, True
