@@ -15,6 +15,7 @@ w(x) + w(T x) = 1 for every pair.
 from __future__ import annotations
 
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -27,7 +28,16 @@ from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.photons.records import F_DELTA_OUT, K_EMITTER, K_SURFACE
 from gdlearn.scene.load import load
 
-CENTER, RADIUS, ETA = np.array([0.0, 0.55, 0.0]), 0.33, 1.5     # the ball of scenes/caustic-closeup.xml
+
+
+class Ball(NamedTuple):
+    """A smooth dielectric sphere in vacuum: the solver's only geometry."""
+    center: np.ndarray
+    radius: float
+    eta: float
+
+
+LENS = Ball(np.array([0.0, 0.55, 0.0]), 0.33, 1.5)     # the ball of scenes/caustic-closeup.xml
 #: a large kernel: only the map decides (see tests/test_gpm_manifold.py)
 R_KERNEL = 10.0
 
@@ -41,23 +51,23 @@ def _tangent(u):
     return a, np.cross(u, a)
 
 
-def _glass_chain(yb, y, m1, m2):
+def _glass_chain(ball, yb, y, m1, m2):
     """The entry and exit points (near m1, m2) where light from yb refracts into the ball and out
     to y, or None. Unknowns: each point's normal in the tangent plane of its initial normal (a chart
     per vertex); residuals: the tangential part of eta_a w_a + eta_b w_b at each vertex (Snell's
     law, w the unit directions towards the chain's neighbours)."""
-    charts = [(_unit(m - CENTER),) + _tangent(_unit(m - CENTER)) for m in (m1, m2)]
+    charts = [(_unit(m - ball.center),) + _tangent(_unit(m - ball.center)) for m in (m1, m2)]
 
     def points(p):
-        return [CENTER + RADIUS * _unit(u0 + p[2 * i] * e1 + p[2 * i + 1] * e2)
+        return [ball.center + ball.radius * _unit(u0 + p[2 * i] * e1 + p[2 * i + 1] * e2)
                 for i, (u0, e1, e2) in enumerate(charts)]
 
     def residual(p):
         a, b = points(p)
         res = []
-        for m, prev, nxt, eta_prev, eta_next in ((a, yb, b, 1.0, ETA), (b, a, y, ETA, 1.0)):
+        for m, prev, nxt, eta_prev, eta_next in ((a, yb, b, 1.0, ball.eta), (b, a, y, ball.eta, 1.0)):
             v = eta_prev * _unit(prev - m) + eta_next * _unit(nxt - m)
-            t1, t2 = _tangent(_unit(m - CENTER))
+            t1, t2 = _tangent(_unit(m - ball.center))
             res += [v @ t1, v @ t2]
         return res
     with warnings.catch_warnings():
@@ -66,9 +76,9 @@ def _glass_chain(yb, y, m1, m2):
     return points(sol) if np.abs(residual(sol)).max() < 1e-12 else None
 
 
-def _fresnel_transmittance(w, m, eta_from, eta_to):
+def _fresnel_transmittance(ball, w, m, eta_from, eta_to):
     """1 - F of the unpolarised Fresnel equations for light arriving at m along w (travel)."""
-    ci = abs(w @ _unit(m - CENTER))
+    ci = abs(w @ _unit(m - ball.center))
     eta = eta_to / eta_from
     st2 = (1.0 - ci * ci) / (eta * eta)
     ct = np.sqrt(1.0 - st2)
@@ -77,25 +87,25 @@ def _fresnel_transmittance(w, m, eta_from, eta_to):
     return 1.0 - 0.5 * (rs * rs + rp * rp)
 
 
-def _lobe_probabilities(yb, m1, m2, y):
+def _lobe_probabilities(ball, yb, m1, m2):
     """The product of the two refractions' discrete lobe probabilities (Mitsuba's dielectric picks
     refraction with probability 1 - F)."""
-    return (_fresnel_transmittance(_unit(m1 - yb), m1, 1.0, ETA)
-            * _fresnel_transmittance(_unit(m2 - m1), m2, ETA, 1.0))
+    return (_fresnel_transmittance(ball, _unit(m1 - yb), m1, 1.0, ball.eta)
+            * _fresnel_transmittance(ball, _unit(m2 - m1), m2, ball.eta, 1.0))
 
 
 def _solid_angle_per_area(yb, y, n, m1, m2, h=1e-5):
     """|d omega / dA_y| of the direction yb -> entry point as y moves on its plane (normal n)."""
     s = _unit(np.cross(n, [0.3, 0.5, 0.7]))
     t = np.cross(n, s)
-    w = lambda yy: _unit(_glass_chain(yb, yy, m1, m2)[0] - yb)
+    w = lambda yy: _unit(_glass_chain(LENS, yb, yy, m1, m2)[0] - yb)
     ws = (w(y + h * s) - w(y - h * s)) / (2 * h)
     wt = (w(y + h * t) - w(y - h * t)) / (2 * h)
     return abs(np.cross(ws, wt) @ w(y))
 
 
-def _on_ball(p):
-    return abs(np.linalg.norm(p - CENTER) - RADIUS) < 1e-6
+def _on_ball(ball, p):
+    return abs(np.linalg.norm(p - ball.center) - ball.radius) < 1e-6
 
 
 def _lens_photons(lp):
@@ -109,7 +119,7 @@ def _lens_photons(lp):
         if q2 < 0 or lp.kind[q2] != K_SURFACE or not lp.flags[q2] & F_DELTA_OUT:
             continue
         b = lp.parent[q2]
-        if b >= 0 and lp.kind[b] == K_EMITTER and _on_ball(lp.pos[q]) and _on_ball(lp.pos[q2]):
+        if b >= 0 and lp.kind[b] == K_EMITTER and _on_ball(LENS, lp.pos[q]) and _on_ball(LENS, lp.pos[q2]):
             yield v, q, q2, b
 
 
@@ -119,13 +129,13 @@ def lens_paths():
     return g, g.tracer.trace(5, 0, 0, 20_000)
 
 
-def _offset_light_path(lp, v, q, q2, yb, m1, m2, ystar):
+def _offset_light_path(ball, lp, v, q, q2, yb, m1, m2, ystar):
     """The light path of the offset photon, built from the solver's chain."""
     off = type(lp)(*(f.copy() for f in lp))
     off.pos[q2], off.pos[q], off.pos[v] = m1, m2, ystar
     off.d_in[q2], off.d_in[q], off.d_in[v] = _unit(m1 - yb), _unit(m2 - m1), _unit(ystar - m2)
-    off.nrm[q2] = off.nsh[q2] = _unit(m1 - CENTER)
-    off.nrm[q] = off.nsh[q] = _unit(m2 - CENTER)
+    off.nrm[q2] = off.nsh[q2] = _unit(m1 - ball.center)
+    off.nrm[q] = off.nsh[q] = _unit(m2 - ball.center)
     return off
 
 
@@ -146,13 +156,13 @@ def test_walk_through_glass_against_an_independent_solver(lens_paths):
         x1, x2 = lp.pos[q2].copy(), lp.pos[q].copy()
         s = _unit(np.cross(n, [0.3, 0.5, 0.7]))
         ystar = ys + rng.uniform(-0.004, 0.004) * s + rng.uniform(-0.004, 0.004) * np.cross(n, s)
-        chain = _glass_chain(yb, ystar, x1, x2)
+        chain = _glass_chain(LENS, yb, ystar, x1, x2)
         if chain is None or max(np.linalg.norm(chain[0] - x1), np.linalg.norm(chain[1] - x2)) > 0.1:
             continue
         m1, m2 = chain
         ok_f, r3_f, pp_f, _ = manifold_photon(sa, lp, g.mtab, g.gather_params, v, q, tuple(ystar), tuple(n),
                                               R_KERNEL, tuple(ystar), stack)
-        off = _offset_light_path(lp, v, q, q2, yb, m1, m2, ystar)
+        off = _offset_light_path(LENS, lp, v, q, q2, yb, m1, m2, ystar)
         ok_r, r3_r, pp_r, _ = manifold_photon(sa, off, g.mtab, g.gather_params, v, q, tuple(ys), tuple(n),
                                               R_KERNEL, tuple(ys), stack)
         counts["both" if ok_f and ok_r else "one way" if ok_f != ok_r else "neither"] += 1
@@ -162,7 +172,7 @@ def test_walk_through_glass_against_an_independent_solver(lens_paths):
             if jac_checked < 12:
                 _, fr, pr = parent_factor(sa, lp, b, q2, tuple(_unit(m1 - yb)))
                 fd = _solid_angle_per_area(yb, ystar, n, m1, m2) / _solid_angle_per_area(yb, ys, n, x1, x2)
-                lobes = _lobe_probabilities(yb, m1, m2, ystar) / _lobe_probabilities(yb, x1, x2, ys)
+                lobes = _lobe_probabilities(LENS, yb, m1, m2) / _lobe_probabilities(LENS, yb, x1, x2)
                 assert pp_f == pytest.approx(pr * fd * lobes, rel=1e-5), v
                 # the power: the emitter's profile, the Jacobian, and the two refractions' values
                 # (1 - F each; the radiance scaling by eta is the same on both sides and cancels)

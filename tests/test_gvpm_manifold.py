@@ -30,22 +30,9 @@ from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.photons.records import K_EMITTER, K_MEDIUM, K_SURFACE
 from gdlearn.scene.load import load
 
-CENTER, RADIUS = np.array([0.0, 0.55, 0.0]), 0.35        # the ball of scenes/volume-caustic.xml
+CAUSTIC = glass.Ball(np.array([0.0, 0.55, 0.0]), 0.35, 1.5)    # the ball of scenes/volume-caustic.xml
 SIGMA_T, BLOCK_TOP = 0.35, -0.44 + 0.55                   # its fog and the fog block's top face (y)
 R_KERNEL = 10.0                                           # only the map decides (test_gpm_manifold.py)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _ball():
-    """The solver of tests/test_gpm_manifold_glass.py on this scene's ball (same ior, larger radius)."""
-    saved = glass.CENTER, glass.RADIUS
-    glass.CENTER, glass.RADIUS = CENTER, RADIUS
-    yield
-    glass.CENTER, glass.RADIUS = saved
-
-
-def _on_ball(p):
-    return abs(np.linalg.norm(p - CENTER) - RADIUS) < 1e-6
 
 
 def _cone_photons(g, lp, stack):
@@ -55,11 +42,12 @@ def _cone_photons(g, lp, stack):
             continue
         e = base_edge(g.setup.sa, lp, v, stack)
         q = e[1]
-        if e[0] != OK or q < 0 or not _on_ball(lp.pos[q]):
+        if e[0] != OK or q < 0 or not glass._on_ball(CAUSTIC, lp.pos[q]):
             continue
         q2 = lp.parent[q]
         b = lp.parent[q2] if q2 >= 0 else -1
-        if q2 >= 0 and lp.kind[q2] == K_SURFACE and _on_ball(lp.pos[q2]) and b >= 0 and lp.kind[b] == K_EMITTER:
+        if q2 >= 0 and lp.kind[q2] == K_SURFACE and glass._on_ball(CAUSTIC, lp.pos[q2]) and b >= 0 \
+                and lp.kind[b] == K_EMITTER:
             yield v, q, q2, b, e
 
 
@@ -70,7 +58,7 @@ def _fog_depth(m2, y):
 
 def _sample_space(yb, y, m1, m2):
     """(omega in a chart of the unit sphere at the base direction, t): what the tracer sampled."""
-    chain = glass._glass_chain(yb, y, m1, m2)
+    chain = glass._glass_chain(CAUSTIC, yb, y, m1, m2)
     w = glass._unit(chain[0] - yb)
     return w, np.linalg.norm(y - chain[1])
 
@@ -97,7 +85,7 @@ def cone():
 
 
 def _offset_light_path(lp, v, q, q2, yb, m1, m2, b_off):
-    off = glass._offset_light_path(lp, v, q, q2, yb, m1, m2, b_off)
+    off = glass._offset_light_path(CAUSTIC, lp, v, q, q2, yb, m1, m2, b_off)
     off.nrm[v] = off.nsh[v] = 0.0
     return off
 
@@ -118,7 +106,7 @@ def test_volume_walk_against_an_independent_solver(cone):
         yb, ys = lp.pos[b].copy(), lp.pos[v].copy()
         x1, x2 = lp.pos[q2].copy(), lp.pos[q].copy()
         b_off = ys + rng.uniform(-0.01, 0.01, 3)
-        chain = glass._glass_chain(yb, b_off, x1, x2)
+        chain = glass._glass_chain(CAUSTIC, yb, b_off, x1, x2)
         if chain is None or b_off[1] > BLOCK_TOP - 0.01:
             continue
         m1, m2 = chain
@@ -138,7 +126,7 @@ def test_volume_walk_against_an_independent_solver(cone):
             # checked for reciprocity above, not against the solver
             if checked < 12 and abs(coarse / jac - 1.0) < 1e-7:
                 _, fr, pr = parent_factor(sa, lp, b, q2, tuple(glass._unit(m1 - yb)))
-                lobes = glass._lobe_probabilities(yb, m1, m2, b_off) / glass._lobe_probabilities(yb, x1, x2, ys)
+                lobes = glass._lobe_probabilities(CAUSTIC, yb, m1, m2) / glass._lobe_probabilities(CAUSTIC, yb, x1, x2)
                 s, s_o = _fog_depth(x2, ys), _fog_depth(m2, b_off)
                 tr = math.exp(-SIGMA_T * (s_o - s))                  # T(l') / T(l); p_l = sigma_t T
                 assert pp_f == pytest.approx(pr * jac * lobes * tr, rel=1e-5), v
