@@ -195,7 +195,7 @@ def references(files, a):
 def print_equal_time(files, refs, a):
     print(f"\n## equal time: {a.seconds:.1f} s per run, {a.et_seeds} seeds, reference pt {a.ref_spp} spp")
     print(f"{'scene':15s} {'method':44s} {'spp':>6s} {'relMSE':>10s} {'min..max over seeds':>22s} "
-          f"{'pt/method':>10s} {'replay/method':>14s}")
+          f"{'pt/method':>10s} {'replay/method':>14s} {'pt/method less floor':>21s}")
     for name, sf in files.items():            # per scene: the policies gpt runs there (a.ok)
         methods = [Method.parse("pt")] + [Method.parse(f"gpt-replay+{s}") for s in a.solvers]
         for p in a.et_policies:
@@ -208,12 +208,17 @@ def print_equal_time(files, refs, a):
                            executor="serial", count=6, first=a.seconds / 10, spp_per_pass=2)
         vs_pt = study.equal_time_ratios("pt")
         vs_rep = {s: study.equal_time_ratios(f"gpt-replay+{s}") for s in a.solvers}
+        floor = refs[name].floor
+        pt_err = np.mean([r["relmse"] for r in study.select(True, method="pt", scene=name)])
         for m in methods:
             fin = study.select(True, method=m.label, scene=name)
             err = [r["relmse"] for r in fin]
             rep = (f"{vs_rep[m.solver][(m.label, name)]:13.2f}x" if m.estimator == "gpt" else f"{'':14s}")
             print(f"{name:15s} {m.label:44s} {np.mean([r['spp'] for r in fin]):6.0f} {np.mean(err):10.3e} "
-                  f"{min(err):10.2e}..{max(err):9.2e} {vs_pt[(m.label, name)]:9.2f}x {rep}", flush=True)
+                  f"{min(err):10.2e}..{max(err):9.2e} {vs_pt[(m.label, name)]:9.2f}x {rep} "
+                  f"{(pt_err - floor) / (np.mean(err) - floor):20.2f}x", flush=True)
+        print(f"{name:15s} reference noise floor {floor:.2e} (in every relMSE above; the last column "
+              f"subtracts it from both)")
 
 
 def supported_scenes(names, res):
