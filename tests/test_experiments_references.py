@@ -35,6 +35,17 @@ def test_render_reference_is_cached(tmp_path, monkeypatch):
     assert c.floor < a.floor
 
 
+def test_a_one_pass_budget_still_has_a_noise_estimate(tmp_path, monkeypatch):
+    # spp_per_pass >= spp would render one pass, whose two halves are the same estimate (variance 0):
+    # the floor would read 0, a noisy reference reported as perfect
+    monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
+    est = "gdlearn.teaching.toy:ToyPrimal"
+    a = R.render_reference(ToyScene(10, 6), est, spp=16, spp_per_pass=64)
+    assert a.spp == 16 and np.isfinite(a.floor) and a.floor > 0
+    one = R.render_reference(ToyScene(10, 6), est, spp=1, spp_per_pass=64)
+    assert np.isnan(one.floor)                         # one sample: no noise estimate at all
+
+
 def test_load_reference_formats(tmp_path):
     img = np.arange(24, dtype=float).reshape(2, 4, 3)
     np.save(tmp_path / "r.npy", img)

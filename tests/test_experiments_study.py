@@ -68,6 +68,21 @@ def test_ratios_and_time_to_reach_on_hand_made_records():
     assert ttr[("a", "s", 0)] == pytest.approx(2.0) and ttr[("b", "s", 0)] == pytest.approx(1.0)
 
 
+def test_ratios_less_the_reference_floor():
+    # against a reference with noise floor 1e-4, a method of own error 4e-4 reads 5e-4 and one of
+    # own error 1e-4 reads 2e-4: 2.5x as measured, 4x between their own errors
+    recs = [{"method": m, "scene": "s", "seed": sd, "final": True, "relmse": e + 1e-4, "relmse_floor": 1e-4}
+            for m, own in (("a", (3e-4, 5e-4)), ("b", (0.5e-4, 1.5e-4))) for sd, e in enumerate(own)]
+    recs.append({"method": "c", "scene": "s", "seed": 0, "final": True, "relmse": 0.9e-4, "relmse_floor": 1e-4})
+    st = S.Study(recs)
+    assert st.equal_time_ratios("a")[("b", "s")] == pytest.approx(2.5)
+    less = st.equal_time_ratios("a", less_floor=True)
+    assert less[("b", "s")] == pytest.approx(4.0) and less[("a", "s")] == pytest.approx(1.0)
+    assert np.isnan(less[("c", "s")])            # below the floor: the reference cannot rank it
+    with pytest.raises(ValueError, match="less_floor"):
+        st.equal_time_ratios("a", metric="mse", less_floor=True)
+
+
 def test_csv_has_every_column(serial, tmp_path):
     path = serial.to_csv(tmp_path / "r.csv")
     rows = list(csv.DictReader(open(path)))

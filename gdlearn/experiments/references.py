@@ -142,14 +142,17 @@ def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_0
     from gdlearn.experiments.study import load_scene, make_integrator
     from gdlearn.integrators.base import render
 
+    # the noise estimate (and so the floor) comes from the two half-buffers, which a single pass
+    # fills with the same estimate: variance 0 would call a noisy reference perfect
+    spp_per_pass = max(1, min(spp_per_pass, spp // 2))
     key = cache_key(scene, estimator, spp, seed, spp_per_pass=spp_per_pass, **options)
     path = cache_dir() / f"{key}.npz"
     if cache and path.is_file():
         return load_reference(path)
     integ = make_integrator(estimator, load_scene(scene), seed, spp_per_pass, **options)
     frame = render(integ, spp=spp)
-    ref = Reference(frame.primal, frame.variance(), frame.spp, getattr(integ, "name", str(estimator)),
-                    key)
+    ref = Reference(frame.primal, frame.variance() if frame.passes >= 2 else None, frame.spp,
+                    getattr(integ, "name", str(estimator)), key)
     if cache:
         ref.save(path)
     return ref

@@ -199,16 +199,33 @@ class Study:
                                              [r.get(metric, np.nan) for r in rs], target)
         return out
 
-    def equal_time_ratios(self, baseline: str, metric: str = "relmse") -> dict[tuple, float]:
+    def equal_time_ratios(self, baseline: str, metric: str = "relmse",
+                          less_floor: bool = False) -> dict[tuple, float]:
         """(method, scene) -> mean final ``metric`` of ``baseline`` / that of the method: how many
-        times lower its error is at the same budget (> 1 means better than the baseline)."""
+        times lower its error is at the same budget (> 1 means better than the baseline).
+
+        ``less_floor`` subtracts the reference's noise floor (the records' ``relmse_floor``,
+        :func:`gdlearn.experiments.metrics.relmse_floor`) from both mean relMSEs first. Measured
+        against a noisy reference every error is the method's own plus the floor, which pulls every
+        ratio towards 1; the difference is the methods' own errors (unbiased, since the reference is
+        independent of the runs). NaN where an error does not rise above the floor.
+        """
+        if less_floor and metric != "relmse":
+            raise ValueError(f"less_floor needs metric='relmse' (the floor is a relMSE), not {metric!r}")
         out = {}
         for scene in self.scenes():
-            b = np.mean([r[metric] for r in self.select(True, method=baseline, scene=scene)])
+            b = self._mean_final(baseline, scene, metric, less_floor)
             for m in self.methods():
-                e = np.mean([r[metric] for r in self.select(True, method=m, scene=scene)])
-                out[(m, scene)] = float(b / e) if e > 0 else float("nan")
+                e = self._mean_final(m, scene, metric, less_floor)
+                out[(m, scene)] = float(b / e) if e > 0 and b > 0 else float("nan")
         return out
+
+    def _mean_final(self, method, scene, metric, less_floor):
+        recs = self.select(True, method=method, scene=scene)
+        e = float(np.mean([r[metric] for r in recs]))
+        if less_floor:
+            e -= float(np.mean([r.get("relmse_floor", np.nan) for r in recs]))
+        return e if np.isfinite(e) else float("nan")
 
 
 def _reference_arrays(ref):
