@@ -11,19 +11,24 @@ unknowns are the chain vertices moved on their surfaces in 2-D charts.
 
 Walk. Start from the base chain (the offset endpoint moved by ~a pixel: the base is an excellent
 initial guess); each iteration takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a
-surface, flips a reflection / refraction side or does not reduce |C| is rejected and halved
-(step halving), at most ``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after
+surface, flips a reflection / refraction side or does not reduce ``|C|`` is rejected and halved
+(step halving), at most ``max_halvings`` times. The walk stops when max ``|c_j|`` < ``tol`` or after
 ``max_iter`` iterations (default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and
 reports failure otherwise. An unreachable target (the solution is off a finite surface, needs total
 internal reflection, or is not found in the budget) is a failure flag, never an exception.
 
 Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sampled from x_b); the
-offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|
-(base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
-theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
+offset's is x'_1. With x_c shared, ``|dx'_1/dx_1|`` = ``|dx'_1/dx_c|`` (offset, x'_b fixed) *
+``|dx_c/dx_1|`` (base, x_b fixed) = ``|det D'|`` / ``|det D|``, where D = dx_1/dx_c = rows of -A^-1 B
+(implicit function theorem on C(X; x_c) = 0, B = dC/dx_c). ``|det D|`` is the ratio of geometry terms of Eq. 8,
 G(x_b .. x_c) / G(x_b, x_1). A and B are central differences of the constraint function (step
 1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10 from round-off),
-which replaces Jakob's analytic second-order surface derivatives.
+which replaces Jakob's analytic second-order surface derivatives. The walk holds x_c fixed and
+needs A alone (4k constraint evaluations a step); the determinants need B too (4(k + 1)).
+
+Scratch: the walk and the determinants work in a :class:`WalkScratch` the caller allocates once
+(a row's, a photon's or a shift's) -- allocated per Newton step, its arrays were reference-counted
+heap arrays in the hottest loop of the manifold shifts.
 
 Geometry of the chain: each chain vertex lies on an analytic surface given as a row of ``shapes``
 (``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
