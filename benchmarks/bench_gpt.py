@@ -38,7 +38,6 @@ integrator's error and skipped.
 Nothing is asserted: numbers depend on the machine and its load (printed in the header).
 """
 import argparse
-import hashlib
 import os
 import sys
 import time
@@ -47,7 +46,7 @@ import numpy as np
 
 from gdlearn.experiments import SceneFile, equal_time
 from gdlearn.experiments.gradients import gradient_errors, shift_summary, summarize
-from gdlearn.experiments.references import cache_dir, load_reference, render_reference
+from gdlearn.experiments.references import render_reference
 from gdlearn.experiments.study import Method
 from gdlearn.integrators import make
 from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, SUPPORTED
@@ -183,46 +182,23 @@ def print_gradient_error(files, refs, a):
             print(f"{name:15s} {m.label:32s} {s['mean']:10.3e} +- {s['stderr']:8.1e}   {q:5.2f}x +- {se:4.2f}")
 
 
-#: the sources a pt reference's image depends on (its key in ``bench_gpt/``): an edit elsewhere in
-#: gdlearn (a shift, a photon estimator, the experiments module) keeps a long reference valid, so runs
-#: before and after such an edit are judged against the same image
-REF_SOURCES = ("gdlearn/kernels", "gdlearn/scene", "gdlearn/integrators/base.py", "gdlearn/integrators/path/pt.py",
-               "gdlearn/integrators/path/surface.py", "gdlearn/integrators/path/volume.py",
-               "gdlearn/integrators/path/packet.py", "gdlearn/integrators/path/params.py",
-               "gdlearn/integrators/path/accumulate.py")
-REF_SEED = 1_000_003
+#: the sources a pt reference's image depends on (its cache key, references.source_digest): an edit
+#: elsewhere in gdlearn (a shift, a photon estimator, the experiments module) keeps a long reference
+#: valid, so runs before and after such an edit are judged against the same image
+PT_SOURCES = ("kernels", "scene", "integrators/base.py", "integrators/path/pt.py", "integrators/path/surface.py",
+              "integrators/path/volume.py", "integrators/path/packet.py", "integrators/path/params.py",
+              "integrators/path/accumulate.py")
 
 
-def _ref_key(sf, a) -> str:
-    h = hashlib.sha256(f"{a.res} {a.ref_spp} {REF_SEED}".encode())
-    h.update(open(sf.path, "rb").read())
-    for src in REF_SOURCES:
-        full = os.path.join(ROOT, src)
-        files = [full] if os.path.isfile(full) else sorted(
-            os.path.join(d, f) for d, _, fs in os.walk(full) for f in fs if f.endswith(".py"))
-        for f in files:
-            h.update(open(f, "rb").read())
-    return h.hexdigest()[:20]
-
-
-def pt_reference(name, sf, a):
-    """A ``--ref-spp`` pt render of the scene, kept in ``$GDLEARN_CACHE/bench_gpt`` under a key of the
-    scene file, the budget and REF_SOURCES (render_reference's key covers all of gdlearn)."""
-    folder = cache_dir().parent / "bench_gpt"
-    file = folder / f"{name}-{a.res}-{a.ref_spp}spp-{_ref_key(sf, a)}.npz"
-    if file.is_file():
-        return load_reference(file)
-    ref = render_reference(sf, "pt", spp=a.ref_spp, seed=REF_SEED, spp_per_pass=64, cache=False)
-    folder.mkdir(parents=True, exist_ok=True)
-    ref.save(file)
-    return ref
+def pt_reference(sf, a):
+    return render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64, sources=PT_SOURCES)
 
 
 def references(files, a):
     refs = {}
     for name, sf in files.items():
         t0 = time.perf_counter()
-        refs[name] = pt_reference(name, sf, a)
+        refs[name] = pt_reference(sf, a)
         print(f"reference {name}: {time.perf_counter() - t0:.1f} s (cached after the first run), "
               f"noise floor {refs[name].floor:.2e}")
     return refs

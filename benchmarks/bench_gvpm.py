@@ -90,23 +90,19 @@ def pass_times(path, a) -> None:
         print(shift_line(n, last[n]), flush=True)
 
 
-#: the sources a vpm reference depends on (its cache key): VPM's camera pass, volume estimates, photons
-REF_SOURCES = ("gdlearn/integrators/photon/volumetric.py", "gdlearn/integrators/photon/volume_gather.py",
-               "gdlearn/integrators/photon/volume_estimates.py", "gdlearn/integrators/photon/camera_beams.py",
-               "gdlearn/integrators/photon/sppm.py", "gdlearn/photons", "gdlearn/kernels/media")
+#: the sources a vpm reference depends on (its cache key, references.source_digest): VPM's camera
+#: pass, volume estimates, photons
+REF_SOURCES = ("integrators/photon/volumetric.py", "integrators/photon/volume_gather.py",
+               "integrators/photon/volume_estimates.py", "integrators/photon/camera_beams.py",
+               "integrators/photon/sppm.py", "photons", "kernels/media")
 REF_SEED = 1_000_003
 
 
 def _ref_key(path, a) -> str:
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    from gdlearn.experiments.references import source_digest
     h = hashlib.sha256(f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}".encode())
     h.update(open(path, "rb").read())
-    for src in REF_SOURCES:
-        full = os.path.join(root, src)
-        files = [full] if os.path.isfile(full) else sorted(
-            os.path.join(d, f) for d, _, fs in os.walk(full) for f in fs if f.endswith(".py"))
-        for f in files:
-            h.update(open(f, "rb").read())
+    h.update(source_digest(REF_SOURCES).encode())
     return h.hexdigest()[:20]
 
 

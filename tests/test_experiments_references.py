@@ -18,6 +18,17 @@ def test_key_follows_scene_content(tmp_path):
     assert R.cache_key(scene, "pt", 64, 1) != k1
 
 
+def test_key_of_named_sources_only(tmp_path):
+    scene = tmp_path / "s.xml"
+    scene.write_text("<scene/>")
+    whole = R.cache_key(scene, "pt", 64, 1)
+    pt_only = R.cache_key(scene, "pt", 64, 1, ("kernels", "integrators/path/pt.py"))
+    assert pt_only != whole and pt_only == R.cache_key(scene, "pt", 64, 1, ("integrators/path/pt.py", "kernels"))
+    assert R.source_digest(("kernels",)) != R.source_digest(("kernels/rng.py",))
+    with pytest.raises(FileNotFoundError, match="relative to the package"):
+        R.source_digest(("gdlearn/kernels",))
+
+
 def test_render_reference_is_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
     sc = ToyScene(10, 6)

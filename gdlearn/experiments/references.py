@@ -91,11 +91,33 @@ def scene_digest(scene) -> str:
     return h.hexdigest()
 
 
-def cache_key(scene, estimator, spp: int, seed: int, **options) -> str:
-    from gdlearn import __version__, source_hash
+def source_digest(sources=None) -> str:
+    """A hash of gdlearn's sources: all of them (:func:`!gdlearn.source_hash`), or only ``sources``,
+    files and folders named relative to the package (``("kernels", "integrators/path/pt.py")``).
+
+    A long reference keyed by the sources its image depends on survives edits elsewhere (a shift, a
+    photon estimator), so runs before and after such an edit are judged against the same image."""
+    from gdlearn import source_hash
+    if sources is None:
+        return source_hash()
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for name in sorted(sources):
+        path = root / name
+        if not path.exists():
+            raise FileNotFoundError(f"source {name!r} is not in gdlearn ({root}); name files or folders "
+                                    "relative to the package, e.g. 'kernels' or 'integrators/path/pt.py'")
+        for f in ([path] if path.is_file() else sorted(path.rglob("*.py"))):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cache_key(scene, estimator, spp: int, seed: int, sources=None, **options) -> str:
+    from gdlearn import __version__
     parts = {"scene": scene_digest(scene), "estimator": str(estimator), "spp": int(spp),
              "seed": int(seed), "options": sorted((k, repr(v)) for k, v in options.items()),
-             "version": __version__, "source": source_hash(), "format": CACHE_FORMAT}
+             "version": __version__, "source": source_digest(sources), "format": CACHE_FORMAT}
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:20]
 
 
@@ -133,11 +155,12 @@ def _read_exr(path) -> np.ndarray:
 
 
 def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_003,
-                     spp_per_pass: int = 16, cache: bool = True, **options) -> Reference:
+                     spp_per_pass: int = 16, cache: bool = True, sources=None, **options) -> Reference:
     """A long run of a gdlearn estimator, cached on disk (see the module docstring).
 
     The default seed is far from the small seeds studies use, so the reference is independent of
     the runs it judges (sharing random numbers would correlate their errors and hide them).
+    ``sources``: key the cache by these of gdlearn's sources only (:func:`source_digest`), not all.
     """
     from gdlearn.experiments.study import load_scene, make_integrator
     from gdlearn.integrators.base import render
@@ -145,7 +168,7 @@ def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_0
     # the noise estimate (and so the floor) comes from the two half-buffers, which a single pass
     # fills with the same estimate: variance 0 would call a noisy reference perfect
     spp_per_pass = max(1, min(spp_per_pass, spp // 2))
-    key = cache_key(scene, estimator, spp, seed, spp_per_pass=spp_per_pass, **options)
+    key = cache_key(scene, estimator, spp, seed, sources, spp_per_pass=spp_per_pass, **options)
     path = cache_dir() / f"{key}.npz"
     if cache and path.is_file():
         return load_reference(path)
@@ -170,7 +193,9 @@ def mitsuba_reference(path, spp: int = 1024, seeds=(101, 102, 103, 104), variant
         path = path.path
     seeds = list(seeds)
     per = max(1, spp // len(seeds))
-    key = cache_key(path, f"mitsuba:{variant}", per * len(seeds), seeds[0], seeds=seeds, **defaults)
+    # Mitsuba renders the file itself: of gdlearn only the driver of its processes matters
+    key = cache_key(path, f"mitsuba:{variant}", per * len(seeds), seeds[0], ("crosscheck/mitsuba.py",),
+                    seeds=seeds, **defaults)
     out = cache_dir() / f"{key}.npz"
     if cache and out.is_file():
         return load_reference(out)
