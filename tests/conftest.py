@@ -92,7 +92,8 @@ def quick_book_cache(tmp_path_factory) -> Path:
 
     The quick-mode book build (tests/test_book_build.py, collected first) executes every chapter and
     stores the executed notebooks here; the chapter tests then check those outputs instead of running
-    each chapter a second time (:func:`executed_by_book_build`). Run on their own, the chapter tests
+    each chapter a second time (:func:`executed_by_book_build`). A session fixture is one per
+    pytest-xdist worker: :func:`pytest_xdist_make_scheduler` keeps both files on one. Run on their own, the chapter tests
     find the folder empty and execute the chapters themselves."""
     return tmp_path_factory.mktemp("quick_jupyter_cache")
 
