@@ -67,4 +67,46 @@ def _prune_old_caches(base: Path, keep: Path, max_age_days: float = 7.0) -> None
             pass
 
 
+def _lock_numba_cache_saves() -> None:
+    """Make numba's on-disk cache safe for processes that compile the same function at once (the
+    test suite's two pytest-xdist workers, a chapter's kernel beside them, dask workers).
+
+    numba 0.68's ``IndexDataCacheFile.save`` reads the function's index, picks the first free data
+    file name, writes the index, then the data, with no lock: two processes saving two signatures of
+    one function both pick ``f.1.nbc``, and the index can end up naming the other signature's
+    machine code under this one's key. Here a save holds an exclusive ``flock`` on the cache
+    folder's lock file while it does the same, and writes the data before the index, so a reader
+    that finds a key in the index finds its data whole (each file is replaced atomically, as numba
+    does). Without ``fcntl`` (Windows) numba's own save stays.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        return
+    import itertools
+
+    from numba.core import caching
+
+    if getattr(caching.IndexDataCacheFile.save, "_gdlearn_locked", False):
+        return
+
+    def save(self, key, data):
+        os.makedirs(self._cache_path, exist_ok=True)
+        with open(os.path.join(self._cache_path, ".gdlearn-save.lock"), "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)           # released when the file closes
+            overloads = self._load_index()
+            name = overloads.get(key)
+            if name is None:
+                taken = set(overloads.values())
+                name = next(n for n in map(self._data_name, itertools.count(1)) if n not in taken)
+            self._save_data(name, data)
+            if overloads.get(key) != name:
+                overloads[key] = name
+                self._save_index(overloads)
+
+    save._gdlearn_locked = True
+    caching.IndexDataCacheFile.save = save
+
+
 _use_source_keyed_numba_cache()
+_lock_numba_cache_saves()

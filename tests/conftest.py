@@ -53,6 +53,33 @@ def notebook_chapters() -> list[Path]:
     return [p for p in toc_files() if p.suffix == ".md" and p.is_file() and is_notebook(p)]
 
 
+#: Test files that share one xdist worker (the ``book`` work unit), in this order: the quick-mode book
+#: build fills this session's jupyter cache (``quick_book_cache``: session-scoped, so one per worker)
+#: and the chapter tests read it. Apart, the chapter tests would execute every chapter a second time.
+BOOK_FILES = ("tests/test_book_build.py", "tests/test_book_chapters.py")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's ``--dist loadfile`` (pyproject.toml's addopts), with the two book files as one
+    work unit handed out first (it is the longest: ~11 min of the suite's ~26 on one core).
+
+    Files stay whole so that a module-scoped fixture (a render several tests check) runs once, not
+    once per worker. Work units go out in collection order -- the book's first -- instead of xdist's
+    default of the most tests first."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class BookTogether(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = super()._split_scope(nodeid)
+            return "book" if path in BOOK_FILES else path
+
+    config.option.loadscopereorder = False
+    return BookTogether(config, log)
+
+
 def pytest_generate_tests(metafunc):
     if "chapter" in metafunc.fixturenames:
         chapters = notebook_chapters()
@@ -65,7 +92,8 @@ def quick_book_cache(tmp_path_factory) -> Path:
 
     The quick-mode book build (tests/test_book_build.py, collected first) executes every chapter and
     stores the executed notebooks here; the chapter tests then check those outputs instead of running
-    each chapter a second time (:func:`executed_by_book_build`). Run on their own, the chapter tests
+    each chapter a second time (:func:`executed_by_book_build`). A session fixture is one per
+    pytest-xdist worker: :func:`pytest_xdist_make_scheduler` keeps both files on one. Run on their own, the chapter tests
     find the folder empty and execute the chapters themselves."""
     return tmp_path_factory.mktemp("quick_jupyter_cache")
 

@@ -4,7 +4,8 @@ formulas and rendered widgets with every non-loopback host unreachable (scripts/
 
 The build goes to a temporary folder with a fresh, session-wide jupyter cache (conftest's
 ``quick_book_cache``), so it neither uses nor disturbs the reader's _build/ and its execution cache,
-and the chapter tests collected after it reuse its executions instead of running every chapter twice.
+and the chapter tests collected after it reuse its executions instead of running every chapter twice
+(under pytest-xdist, tests/conftest.py hands this file and test_book_chapters.py to one worker).
 """
 import importlib.util
 import os

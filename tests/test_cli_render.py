@@ -93,8 +93,13 @@ JIT_WAIT = 1800
 @pytest.mark.skipif(os.name != "posix", reason="SIGINT delivery to a child process")
 def test_ctrl_c_saves_what_was_accumulated(tmp_path):
     out = tmp_path / "int.npy"
+    # The child gets SIGINT's default disposition, as a command started at a terminal has: started
+    # from a background job (`make test &`, a CI runner) the suite inherits SIGINT ignored, an
+    # ignored signal stays ignored across exec, Python then installs no KeyboardInterrupt handler,
+    # and the 10^6 spp render would run until JIT_WAIT ran out.
     p = subprocess.Popen([sys.executable, "-m", "gdlearn", "render", SCENE, "--spp", "1000000", "--set", "res=16",
-                          "--out", str(out), "--no-progress"], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+                          "--out", str(out), "--no-progress"], cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         lines = _stderr_lines(p)
         seen = []

@@ -84,3 +84,23 @@ def test_mitsuba_reference_has_noise_estimate(tmp_path, monkeypatch):
     again = R.mitsuba_reference(scene, spp=64, seeds=(1, 2))       # from the cache
     assert again.path is not None
     np.testing.assert_array_equal(again.image, ref.image)
+
+
+def test_concurrent_saves_of_one_reference(tmp_path, monkeypatch):
+    """Two processes saving the same reference at once (pytest-xdist workers, a chapter's kernel):
+    here the second save runs whole while the first has written its temporary file but not yet
+    moved it into place. Both succeed, the file loads back, and no temporary file is left."""
+    path = tmp_path / "references" / "k.npz"
+    first, second = R.Reference(np.zeros((2, 2, 3)), spp=1), R.Reference(np.ones((2, 2, 3)), spp=2)
+    savez, calls = np.savez_compressed, []
+
+    def savez_then_interleave(file, **arrays):
+        savez(file, **arrays)
+        calls.append(file)
+        if len(calls) == 1:                             # the first save is between write and move
+            second.save(path)
+
+    monkeypatch.setattr(np, "savez_compressed", savez_then_interleave)
+    first.save(path)
+    assert R.load_reference(path).spp == 1              # the last move wins, whole
+    assert [p.name for p in path.parent.iterdir()] == ["k.npz"]

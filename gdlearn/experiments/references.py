@@ -24,6 +24,7 @@ import hashlib
 import json
 import os
 import re
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,9 +60,14 @@ class Reference:
         arrays = {"image": self.image, "meta": np.array(meta)}
         if self.variance is not None:
             arrays["variance"] = self.variance
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez_compressed(tmp, **arrays)
-        os.replace(tmp, path)                # atomic: a concurrent reader never sees half a file
+        # A name of this save's own: two processes rendering the same reference at once (pytest-xdist
+        # workers, a chapter's kernel) must not write into, or move away, one another's file.
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp.npz")
+        try:
+            np.savez_compressed(tmp, **arrays)
+            os.replace(tmp, path)            # atomic: a concurrent reader never sees half a file
+        finally:
+            tmp.unlink(missing_ok=True)
         self.path = path
         return path
 
