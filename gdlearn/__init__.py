@@ -89,6 +89,10 @@ def _lock_numba_cache_saves() -> None:
 
     if getattr(caching.IndexDataCacheFile.save, "_gdlearn_locked", False):
         return
+    # written against numba 0.68 (pyproject pins it); another version keeps its own save
+    if not all(hasattr(caching.IndexDataCacheFile, m) for m in ("_load_index", "_save_index", "_save_data",
+                                                                  "_data_name")):
+        return
 
     def save(self, key, data):
         os.makedirs(self._cache_path, exist_ok=True)
