@@ -11,24 +11,19 @@ unknowns are the chain vertices moved on their surfaces in 2-D charts.
 
 Walk. Start from the base chain (the offset endpoint moved by ~a pixel: the base is an excellent
 initial guess); each iteration takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a
-surface, flips a reflection / refraction side or does not reduce ``|C|`` is rejected and halved
-(step halving), at most ``max_halvings`` times. The walk stops when max ``|c_j|`` < ``tol`` or after
+surface, flips a reflection / refraction side or does not reduce |C| is rejected and halved
+(step halving), at most ``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after
 ``max_iter`` iterations (default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and
 reports failure otherwise. An unreachable target (the solution is off a finite surface, needs total
 internal reflection, or is not found in the budget) is a failure flag, never an exception.
 
 Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sampled from x_b); the
-offset's is x'_1. With x_c shared, ``|dx'_1/dx_1|`` = ``|dx'_1/dx_c|`` (offset, x'_b fixed) *
-``|dx_c/dx_1|`` (base, x_b fixed) = ``|det D'|`` / ``|det D|``, where D = dx_1/dx_c = rows of -A^-1 B
-(implicit function theorem on C(X; x_c) = 0, B = dC/dx_c). ``|det D|`` is the ratio of geometry terms of Eq. 8,
+offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|
+(base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
+theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
 G(x_b .. x_c) / G(x_b, x_1). A and B are central differences of the constraint function (step
 1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10 from round-off),
-which replaces Jakob's analytic second-order surface derivatives. The walk holds x_c fixed and
-needs A alone (4k constraint evaluations a step); the determinants need B too (4(k + 1)).
-
-Scratch: the walk and the determinants work in a :class:`WalkScratch` the caller allocates once
-(a row's, a photon's or a shift's) -- allocated per Newton step, its arrays were reference-counted
-heap arrays in the hottest loop of the manifold shifts.
+which replaces Jakob's analytic second-order surface derivatives.
 
 Geometry of the chain: each chain vertex lies on an analytic surface given as a row of ``shapes``
 (``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
@@ -39,7 +34,6 @@ surface (a medium end vertex would need a 3-D chart); glossy chains moved as if 
 9-10, with the half-vector reparameterisation of the Jacobian) are not implemented.
 """
 import math
-from typing import NamedTuple
 
 import numpy as np
 
@@ -64,8 +58,6 @@ MAX_ITER = 5
 MAX_HALVINGS = 10
 TOL = 1e-12
 FD_REL_STEP = 1e-6
-#: the endpoint chart's normal where B = dC/dx_e is not computed (the walk)
-_NO_NORMAL = (0.0, 0.0, 0.0)
 
 
 def plane_row(point, normal, u_axis, extent=(math.inf, math.inf)):
@@ -208,59 +200,29 @@ def chain_length_scale(x0, X, xe, k):
     return total / (k + 1)
 
 
-class WalkScratch(NamedTuple):
-    """The arrays the walk and Eq. 8's determinants work in, for chains of up to ``kmax`` vertices
-    (:func:`walk_scratch`). The caller allocates them once (per row, per photon, per shift) and
-    passes them down: allocated in every Newton iteration they were heap arrays with reference
-    counts in the hottest loop of the manifold shifts. Each function uses the leading 2k rows."""
-    C: np.ndarray         # (2 kmax,): the constraints at the current chain
-    Cn: np.ndarray        # (2 kmax,): at the trial chain of a Newton step
-    A: np.ndarray         # (2 kmax, 2 kmax): dC/dX (factorised in place by solve_linear)
-    B: np.ndarray         # (2 kmax, 2): dC/dx_e, then the solution of A Z = B
-    dX: np.ndarray        # (2 kmax, 1): the Newton step
-    Xn: np.ndarray        # (kmax, 3): the trial chain
-    Xp: np.ndarray        # (kmax, 3): the chain with one vertex probed (finite differences)
-    cp: np.ndarray        # (2 kmax,): the constraints at the + probe
-    cm: np.ndarray        # (2 kmax,): at the - probe
-
-
 @block
-def walk_scratch(kmax):
-    """A :class:`WalkScratch` for chains of up to kmax vertices."""
-    m = 2 * kmax
-    return WalkScratch(np.empty(m), np.empty(m), np.empty((m, m)), np.empty((m, 2)), np.empty((m, 1)),
-                       np.empty((kmax, 3)), np.empty((kmax, 3)), np.empty(m), np.empty(m))
-
-
-@inlined
-def _copy_rows(dst, src, k):
-    """dst[:k] = src[:k] for (k x 3) chains (the scratch may have more rows than the chain)."""
-    for j in range(k):
-        dst[j, 0], dst[j, 1], dst[j, 2] = src[j, 0], src[j, 1], src[j, 2]
-
-
-@block
-def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, with_b, ws):
-    """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) into ``ws.A`` and, ``with_b``,
-    B = dC/dx_e (2k x 2, tangent plane of x_e with normal ne) into ``ws.B``, by central differences
-    (module docstring). The walk needs A alone: B's two columns are 4 of the 4(k + 1) constraint
-    evaluations, half of them for a mirror (k = 1). False if a probe is invalid."""
-    A, B, Xp, cp, cm = ws.A, ws.B, ws.Xp, ws.cp, ws.cm
+def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+    """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) and B = dC/dx_e (2k x 2, tangent
+    plane of x_e with normal ne), by central differences. False if a probe is invalid."""
     m = 2 * k
     h = FD_REL_STEP * chain_length_scale(x0, X, xe, k)
     if not (h > 0.0 and math.isfinite(h)):
         return False                        # a collapsed or non-finite chain
-    for j in range(k + 1 if with_b else k):
+    Xp = X.copy()
+    cp = np.empty(m)
+    cm = np.empty(m)
+    for j in range(k + 1):
         for a in range(2):
             for sgn in range(2):
                 d = h if sgn == 0 else -h
                 u, v = (d, 0.0) if a == 0 else (0.0, d)
                 xe_p = xe
-                _copy_rows(Xp, X, k)
                 if j < k:
+                    Xp[:] = X
                     p = shape_chart(shapes, j, _v3(X, j, 0), u, v)
                     Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
                 else:
+                    Xp[:] = X
                     s, t = vec.coordinate_system(ne)
                     xe_p = vec.add(xe, vec.add(vec.scale(s, u), vec.scale(t, v)))
                 ok = constraints(x0, Xp, xe_p, shapes, etas, refract, targets, k,
@@ -292,19 +254,23 @@ def _norm2(a, m):
 
 
 @block
-def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol, ws):
+def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
     """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
-    chain) until it joins x0 and xe, in the scratch ``ws`` (:class:`WalkScratch`). Returns ``(ok,
-    iterations, residual)`` (max ``|c_j|``). The endpoint xe is fixed: the step needs A = dC/dX only."""
-    C, Cn, A, dX, Xn = ws.C, ws.Cn, ws.A, ws.dX, ws.Xn
+    chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
     m = 2 * k
+    C = np.empty(m)
+    Cn = np.empty(m)
+    A = np.empty((m, m))
+    B = np.empty((m, 2))
+    dX = np.empty((m, 1))
+    Xn = X.copy()
     if not constraints(x0, X, xe, shapes, etas, refract, targets, k, C):
         return False, 0, math.inf
     r = _max_abs(C, m)
     for it in range(max_iter):
         if r < tol:
             return True, it, r
-        if not constraint_derivatives(x0, X, xe, _NO_NORMAL, shapes, etas, refract, targets, k, False, ws):
+        if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
             return False, it, r
         for i in range(m):
             dX[i, 0] = -C[i]
@@ -321,21 +287,20 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
             lam *= 0.5                      # step halving on rejection
         if not accepted:
             return False, it + 1, r
-        _copy_rows(X, Xn, k)
-        for i in range(m):
-            C[i] = Cn[i]
+        X[:] = Xn
+        C[:] = Cn
         r = _max_abs(C, m)
     return r < tol, max_iter, r
 
 
 @block
-def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k, ws):
-    """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8 (Hua et
-    al. 2017), G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints:
-    the leading 2 x 2 block of -A^-1 B, x_e moving in the plane of normal ne."""
-    A, B = ws.A, ws.B
+def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
+    """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8,
+    G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints."""
     m = 2 * k
-    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, True, ws):
+    A = np.empty((m, m))
+    B = np.empty((m, 2))
+    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
         return 0.0, False
     if not solve_linear(A, B, m, 2):
         return 0.0, False
@@ -346,14 +311,12 @@ def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k, ws):
 
 
 @block
-def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets, c):
+def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
     """Fill targets (k x 2) with the base chain's tangential half-vector components (0 at a perfect
-    specular vertex up to round-off); c (at least 2k) is scratch. False if the base chain itself
-    is invalid."""
-    for j in range(k):
-        targets[j, 0] = 0.0
-        targets[j, 1] = 0.0
-    if not constraints(x0, X, xe, shapes, etas, refract, targets, k, c):
+    specular vertex up to round-off); False if the base chain itself is invalid."""
+    zeros = np.zeros((k, 2))
+    c = np.empty(2 * k)
+    if not constraints(x0, X, xe, shapes, etas, refract, zeros, k, c):
         return False
     for j in range(k):
         targets[j, 0] = c[2 * j]
@@ -362,12 +325,12 @@ def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets, c):
 
 
 @block
-def _walks_back(x_b, X_base, x_c, Xo, shapes, etas, refract, targets, k, max_iter, Xb, ws):
+def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, max_iter):
     """True if the walk from the offset chain back to x_b returns to the base chain: near a caustic
-    several chains join the same endpoints and the shift would not be invertible there. Xb
-    (k x 3) is scratch for the walked-back chain."""
-    _copy_rows(Xb, Xo, k)
-    ok, _, _ = manifold_walk(x_b, x_c, Xb, shapes, etas, refract, targets, k, max_iter, MAX_HALVINGS, TOL, ws)
+    several chains join the same endpoints and the shift would not be invertible there."""
+    Xb = Xo.copy()
+    ok, _, _ = manifold_walk(x_b, x_c, n_c, Xb, shapes, etas, refract, targets, k, max_iter,
+                             MAX_HALVINGS, TOL)
     if not ok:
         return False
     tol = 1e-7 * chain_length_scale(x_b, X_base, x_c, k)
@@ -383,40 +346,31 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
                    check_reversible):
     """Shift the specular chain X_base (k x 3) between x_b and x_c to join x'_b and x_c.
 
-    Returns ``(jacobian, ok, iterations)``: J = ``|dx'_1/dx_1|`` in the area measure (GPM Eq. 7-8,
-    module docstring) and the offset chain in X_out. Failure (walk did not converge in ``max_iter``,
+    Returns ``(jacobian, ok, iterations)``: J = |dx'_1/dx_1| in the area measure (GPM Eq. 7-8, module
+    docstring) and the offset chain in X_out. Failure (walk did not converge in ``max_iter``,
     unreachable target, singular constraints) returns J = 0 and ok = False. With
     ``check_reversible`` the backward walk must also lead back to the base chain (else ok = False:
-    an irreversible shift, STAR Sec. 3.5); it doubles the cost. Allocates its scratch once per
-    call (``manifold_shift_in`` takes it from the caller).
+    an irreversible shift, STAR Sec. 3.5); it doubles the cost.
     """
-    return manifold_shift_in(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, X_out, max_iter,
-                             check_reversible, np.empty((max(k, 1), 2)), np.empty((max(k, 1), 3)),
-                             walk_scratch(max(k, 1)))
-
-
-@block
-def manifold_shift_in(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, X_out, max_iter,
-                      check_reversible, targets, Xb, ws):
-    """:func:`manifold_shift` in the caller's scratch: targets (k x 2), Xb (k x 3) and ws (a
-    :class:`WalkScratch`), each for at least k chain vertices."""
     if k < 1 or k > X_base.shape[0] or vec.dot(n_c, n_c) == 0.0:
         return 0.0, False, 0            # x_c must be a surface vertex (its 2-D chart is the measure)
-    if not half_vector_targets(x_b, X_base, x_c, shapes, etas, refract, k, targets, ws.C):
+    targets = np.empty((k, 2))
+    if not half_vector_targets(x_b, X_base, x_c, shapes, etas, refract, k, targets):
         return 0.0, False, 0
-    _copy_rows(X_out, X_base, k)
-    ok, iters, _ = manifold_walk(x_b_offset, x_c, X_out, shapes, etas, refract, targets, k, max_iter,
-                                 MAX_HALVINGS, TOL, ws)
+    X_out[:k] = X_base[:k]
+    Xo = X_out[:k]
+    ok, iters, _ = manifold_walk(x_b_offset, x_c, n_c, Xo, shapes, etas, refract, targets, k,
+                                 max_iter, MAX_HALVINGS, TOL)
     if not ok:
         return 0.0, False, iters
-    det_b, ok_b = chain_endpoint_det(x_b, X_base, x_c, n_c, shapes, etas, refract, targets, k, ws)
-    det_o, ok_o = chain_endpoint_det(x_b_offset, X_out, x_c, n_c, shapes, etas, refract, targets, k, ws)
+    det_b, ok_b = chain_endpoint_det(x_b, X_base, x_c, n_c, shapes, etas, refract, targets, k)
+    det_o, ok_o = chain_endpoint_det(x_b_offset, Xo, x_c, n_c, shapes, etas, refract, targets, k)
     if not (ok_b and ok_o):
         return 0.0, False, iters
     j = det_o / det_b
     if not (j > 0.0 and math.isfinite(j)):
         return 0.0, False, iters
-    if check_reversible and not _walks_back(x_b, X_base, x_c, X_out, shapes, etas, refract, targets, k,
-                                            max_iter, Xb, ws):
+    if check_reversible and not _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract,
+                                            targets, k, max_iter):
         return 0.0, False, iters
     return j, True, iters

@@ -75,8 +75,7 @@ from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED
     GvpmOut, _offset_path
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
     store_edge
-from gdlearn.integrators.photon.photon_manifold import N_SLOTS, ChainScratch, borrow_chain, chain_scratch, \
-    complete_volume_photon
+from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -98,7 +97,6 @@ class Scratch(NamedTuple):
     acc: np.ndarray       # (9, 3): the pixel half's L, D_k, S_k, summed in photon order, written once
     cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts null / mixed / reconnected / failed / manifold
     edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
-    chain: ChainScratch   # the manifold walk's arrays and its photons' chains (photon_manifold)
 
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -201,7 +199,7 @@ def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
             np.empty((MAX_BEAMS, 2), dtype=np.int64), np.empty((4, MAX_BEAMS, BEAM_COLS)),
             np.empty((4, MAX_BEAMS, 2), dtype=np.int64), np.zeros(4, dtype=np.bool_))
     scr = Scratch(np.empty(nmax, dtype=np.int64), np.empty(3), np.empty(3), np.empty((9, 3)),
-                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)), chain_scratch(N_SLOTS))
+                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)))
     return _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
 
 
@@ -215,7 +213,7 @@ def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, s
     stack, beams, bstate = borrow(work[0]), borrow(work[1]), borrow(work[2])
     obeams, obstate, o_ok = borrow(work[3]), borrow(work[4]), borrow(work[5])
     scr = Scratch(borrow(scr.buf), borrow(scr.oa), borrow(scr.da), borrow(scr.acc), borrow(scr.cnt),
-                  borrow(scr.edge), borrow_chain(scr.chain))
+                  borrow(scr.edge))
     for x in range(w):
         par = (x + y) & 1 if gp.subsets else 0
         for hh in range(2):
@@ -317,8 +315,7 @@ def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack):
         return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]), False
     if scr.edge[0, 0] == EDGE_UNKNOWN:
         store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
-    status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack,
-                                                          scr.chain)
+    status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack)
     return status == OK, f3, rl, w_in, walked
 
 

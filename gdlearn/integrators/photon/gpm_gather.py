@@ -58,7 +58,7 @@ from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.gather import _borrow_grid, gather_path, pixel_angle
 from gdlearn.integrators.photon.gpm_light import P_FAIL, _dir, parent_base, parent_offset, project, same_point
-from gdlearn.integrators.photon.photon_manifold import N_SLOTS, chain_scratch, manifold_photon_in
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset, finite3, \
     make_shift_photons, offset_points, put, store_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
@@ -84,7 +84,7 @@ def shift_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     """The hybrid shift's light half for photon row ``v`` gathered at ``base`` = (p, frame) and
     moved to the offset gather point ``off`` = (p', ng', frame', wi', mat'). Returns (status,
     photon term at the offset (before the camera weight), MIS density ratio offset / base)."""
-    return _shift(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, chain_scratch(1), stack)
+    return _shift(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, stack)
 
 
 @inlined
@@ -99,10 +99,9 @@ def photon_base(sa, lp, v, r, stack):
 
 
 @inlined
-def _shift(sa, lp, mtab, prm, v, pb, base, off, r, cs, stack):
+def _shift(sa, lp, mtab, prm, v, pb, base, off, r, stack):
     """:func:`shift_photon` from the photon's base side ``pb`` = (q, parent_base) (:func:`photon_base`,
-    computed once per photon for the four neighbours; ``cs`` the row's scratch of the manifold branch,
-    ``photon_manifold.ChainScratch``). Inlined into the photon loop: a call passing
+    computed once per photon for the four neighbours). Inlined into the photon loop: a call passing
     the scene, the light records and the two gather points as tuples costs about as much as the
     shift's arithmetic."""
     zero = (0.0, 0.0, 0.0)
@@ -124,7 +123,7 @@ def _shift(sa, lp, mtab, prm, v, pb, base, off, r, cs, stack):
         return FAILED, zero, 0.0
     status, fr, pr = parent_offset(sa, lp, q, pbase, d)
     if status == 2:                                                        # a specular parent
-        ok, ratio3, pp, w_arr = manifold_photon_in(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack, cs)
+        ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
         return at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
     if status != 0:
         return FAILED, zero, 0.0
@@ -191,7 +190,6 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     offs = offset_points()          # the four offset gather points of the current base sample
     o_ok = offs[0]
     acc = np.empty((9, 3))          # the pixel's nine buffers while its photons are summed (_shift_photons)
-    cs = chain_scratch(N_SLOTS)     # the manifold branch's walk and its photons' chains (photon_manifold)
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -226,6 +224,6 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand, n,
-                                   offs, acc, cs, stack)
+                                   offs, acc, stack)
     return nbad
 

@@ -52,7 +52,6 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_p
 from gdlearn.integrators.photon.gather import _borrow_grid, pixel_angle
 from gdlearn.integrators.photon.gpm_gather import allocate, borrow_out
 from gdlearn.integrators.photon.gvol_surface_light import photon_base, shift_from_base
-from gdlearn.integrators.photon.photon_manifold import N_SLOTS, chain_scratch
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, finite3, make_shift_photons, \
     offset_points, put, store_offset
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -98,7 +97,6 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     bstate = np.empty((MAX_BEAMS, 2), dtype=np.int64)
     offs = offset_points()          # the four offset gather points of the current base sample
     acc = np.empty((9, 3))          # the pixel's nine buffers while its photons are summed (_shift_photons)
-    cs = chain_scratch(N_SLOTS)     # the manifold branch's walk and its photons' chains (photon_manifold)
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -122,7 +120,7 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                 cand = np.empty(2 * n, dtype=np.int64)
                 n = hashgrid.query(grids[hh], p, r, cand)
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand,
-                                   n, offs, acc, cs, stack)
+                                   n, offs, acc, stack)
     return nbad
 
 

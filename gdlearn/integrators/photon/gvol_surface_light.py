@@ -50,7 +50,7 @@ from gdlearn.integrators.photon.gather import specular_vertex
 from gdlearn.integrators.photon.gpm_light import P_FAIL, P_SPECULAR, _dir, same_point
 from gdlearn.integrators.photon.gvpm_light import FAIL, FAIL_SPECULAR, MAX_CROSSINGS, OK, _ancestor, _spawn, \
     parent_base_vol, parent_offset_vol
-from gdlearn.integrators.photon.photon_manifold import chain_scratch, manifold_photon_in
+from gdlearn.integrators.photon.photon_manifold import manifold_photon
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, at_offset
 from gdlearn.shifts.photon import offset_target, photon_geometry_ratio, rotate
 
@@ -222,15 +222,13 @@ def shift_surface_photon(sa, lp, mtab, prm, v, base, off, r, stack):
     to the offset one ``off`` = (p', ng', frame', wi', mat'), kernel radius r. Returns (status, the
     photon term at the offset before the camera weight, MIS density ratio offset / base): the
     contract of :func:`gdlearn.integrators.photon.gpm_gather.shift_photon`."""
-    return shift_from_base(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, chain_scratch(1),
-                           stack)
+    return shift_from_base(sa, lp, mtab, prm, v, photon_base(sa, lp, v, r, stack), base, off, r, stack)
 
 
 @inlined
-def shift_from_base(sa, lp, mtab, prm, v, pb, base, off, r, cs, stack):
+def shift_from_base(sa, lp, mtab, prm, v, pb, base, off, r, stack):
     """:func:`shift_surface_photon` from the photon's base side ``pb`` (:func:`photon_base`, computed
-    once per photon for the four neighbours; ``cs``: the row's scratch of the manifold branch,
-    ``photon_manifold.ChainScratch``); inlined into the photon loop (photon_shift_loop)."""
+    once per photon for the four neighbours); inlined into the photon loop (photon_shift_loop)."""
     q = pb[0]
     if q < 0:
         return FAILED, _ZERO, 0.0
@@ -241,7 +239,7 @@ def shift_from_base(sa, lp, mtab, prm, v, pb, base, off, r, cs, stack):
     nstar = rotate((lp.nrm[v, 0], lp.nrm[v, 1], lp.nrm[v, 2]), frame, frame2)
     status, f3, ratio, d, yh = _reconnect(sa, lp, prm, v, pb, ystar, nstar, p2, r, stack)
     if status == FAIL_SPECULAR and pb[5]:                                  # chain and edge in vacuum
-        ok, ratio3, pp, w_arr = manifold_photon_in(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack, cs)
+        ok, ratio3, pp, w_arr = manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack)
         return at_offset(MANIFOLD if ok else FAILED, lp, v, ratio3, pp, w_arr, off)
     if not (status == OK and _reversible(sa, lp, q, pb[1], ys, yh, ystar, p, frame, p2, frame2, r, stack)):
         return FAILED, _ZERO, 0.0

@@ -64,7 +64,7 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED,
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, store_edge
-from gdlearn.integrators.photon.photon_manifold import N_SLOTS, ChainScratch, chain_scratch, complete_volume_photon
+from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
 from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -95,7 +95,6 @@ class Scratch(NamedTuple):
     rows: np.ndarray      # one distance sample's admitted photons (light-vertex rows; -1: dropped)
     cb: np.ndarray        # (n, 3): their base terms c_b
     edge: np.ndarray      # (n, EDGE_COLS): their recorded edges a -> b, computed once for all neighbours
-    chain: ChainScratch   # the manifold walk's arrays and its photons' chains, kept for all neighbours
 
 
 def allocate(h: int, w: int) -> GvpmOut:
@@ -132,7 +131,7 @@ def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
     # per-row scratch, allocated once (not per sample): the grid's candidates, then one distance
     # sample's admitted photons (row, base term) and their recorded edges (gvpm_light.base_edge)
     scr = Scratch(np.empty(nbuf, dtype=np.int64), np.empty((4, 12)), np.empty(nbuf, dtype=np.int64),
-                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)), chain_scratch(N_SLOTS))
+                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)))
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -318,7 +317,7 @@ def _neighbour(sa, lp, mtab, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, 
                 if scr.edge[i, 0] == EDGE_UNKNOWN:
                     store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
                 status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
-                                                                      stack, scr.chain)
+                                                                      stack)
                 ok = status == OK
             if ok:
                 ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])

@@ -35,24 +35,14 @@ see back to y_s (the paper's reversibility check), or one the projection moved o
 shift, from the offset's own parent, would not return y_s); for a volume photon, a chain not in vacuum
 (the walk carries no transmittance) or a last edge that crosses another number of null interfaces or
 meets a surface before b' (:func:`gdlearn.integrators.photon.gvpm_light.edge_walk`, the whole segment).
-
-Cost. A photon is shifted to four neighbours, and what does not depend on the neighbour -- its
-chain (``chain_rows``, ``load_chain``), the half-vector targets and the base chain's determinant of
-Eq. 8, whose chart (y_s's normal, or a volume photon's last segment) is the photon's own -- is
-computed once per photon and kept in the row's :class:`ChainScratch`, which also holds the arrays
-of the walk (``gdlearn.shifts.manifold.WalkScratch``): nothing is allocated per shift. The kernels
-call the ``*_in`` functions with that scratch; :func:`manifold_photon` and
-:func:`manifold_volume_photon` allocate one for a single call.
 """
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
 from gdlearn.kernels import layout as L
-from gdlearn.kernels.arrays import borrow
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_delta_only
 from gdlearn.kernels.geometry import INFO_EMITTER, offset_origin
 from gdlearn.kernels.jit import block, inlined
@@ -67,55 +57,6 @@ from gdlearn.shifts.photon import projection_jacobian
 from gdlearn.shifts.policy import MAX_CHAIN
 
 _ZERO = (0.0, 0.0, 0.0)
-
-
-#: base sides a :class:`ChainScratch` keeps: photon row v's lives in slot v mod N_SLOTS. G-VPM's
-#: camera pass shifts a distance sample's photons to one neighbour after the other (gvpm_gather),
-#: so a photon's base side must outlive the shifts of the photons gathered with it
-N_SLOTS = 64
-
-
-class ChainScratch(NamedTuple):
-    """A row's scratch for the manifold branch (:func:`chain_scratch`; valid for one set of light
-    records ``lp``: a slot is found by photon row). The base sides of recently shifted photons,
-    direct-mapped by row (slot v mod n, n the slots; a photon whose slot another photon took is
-    loaded again, with the same result), then the arrays of the shift at hand."""
-    key: np.ndarray       # (n, 3) int: photon row whose base side the slot holds (-1: none), k (0: the
-    #                       chain does not qualify), row of y_b
-    rows: np.ndarray      # (n, MAX_CHAIN) int: the chain's light-vertex rows, y_{s-1} first (chain_rows)
-    X: np.ndarray         # (n, MAX_CHAIN, 3): the base chain, y_{b+1} first (load_chain)
-    shapes: np.ndarray    # (n, MAX_CHAIN, SH_WIDTH): each chain vertex's shape row
-    etas: np.ndarray      # (n, MAX_CHAIN): relative indices
-    refr: np.ndarray      # (n, MAX_CHAIN) bool: the base took a refraction
-    targets: np.ndarray   # (n, MAX_CHAIN, 2): the base's half-vector targets
-    det: np.ndarray       # (n,): Eq. 8's det of the base chain (NaN: not computed yet, 0: singular)
-    Xo: np.ndarray        # (MAX_CHAIN, 3): the offset chain
-    Xb: np.ndarray        # (MAX_CHAIN, 3): the chain walked back from it
-    nrm_o: np.ndarray     # (MAX_CHAIN, 6): the offset chain's geometric and shading normals
-    walk: M.WalkScratch   # the Newton walk's and the determinants' arrays
-
-
-@block
-def chain_scratch(n_slots):
-    """A :class:`ChainScratch` keeping n_slots base sides (every slot empty)."""
-    key = np.full((n_slots, 3), -1, dtype=np.int64)
-    return ChainScratch(key, np.empty((n_slots, MAX_CHAIN), dtype=np.int64), np.empty((n_slots, MAX_CHAIN, 3)),
-                        np.empty((n_slots, MAX_CHAIN, M.SH_WIDTH)), np.empty((n_slots, MAX_CHAIN)),
-                        np.empty((n_slots, MAX_CHAIN), dtype=np.bool_), np.empty((n_slots, MAX_CHAIN, 2)),
-                        np.empty(n_slots), np.empty((MAX_CHAIN, 3)), np.empty((MAX_CHAIN, 3)),
-                        np.empty((MAX_CHAIN, 6)), M.walk_scratch(MAX_CHAIN))
-
-
-@block
-def borrow_chain(cs):
-    """``cs`` of borrowed views (``kernels.arrays.borrow``: no reference counts), for a row whose
-    scratch outlives the call."""
-    w = cs.walk
-    return ChainScratch(borrow(cs.key), borrow(cs.rows), borrow(cs.X), borrow(cs.shapes), borrow(cs.etas),
-                        borrow(cs.refr), borrow(cs.targets), borrow(cs.det), borrow(cs.Xo), borrow(cs.Xb),
-                        borrow(cs.nrm_o),
-                        M.WalkScratch(borrow(w.C), borrow(w.Cn), borrow(w.A), borrow(w.B), borrow(w.dX),
-                                      borrow(w.Xn), borrow(w.Xp), borrow(w.cp), borrow(w.cm)))
 
 
 @block
@@ -153,9 +94,13 @@ def _delta_value(mat, ns, w_in, w_out_world, refl):
 
 
 @block
-def load_chain(sa, lp, mtab, v, rows, k, X, shapes, etas, refr):
-    """The chain from y_b's side into X[0] = y_{b+1} .. X[k-1] = y_{s-1}, with each vertex's shape
-    row, relative index and event (True: a refraction) as the base path took it."""
+def load_chain(sa, lp, mtab, v, rows, k):
+    """The chain from y_b's side, X[0] = y_{b+1} .. X[k-1] = y_{s-1}, with each vertex's shape row,
+    relative index and event (True: a refraction) as the base path took it."""
+    X = np.empty((k, 3))
+    shapes = np.empty((k, M.SH_WIDTH))
+    etas = np.empty(k)
+    refr = np.empty(k, dtype=np.bool_)
     for j in range(k):
         row = rows[k - 1 - j]
         child = v if j == k - 1 else rows[k - 2 - j]
@@ -167,95 +112,60 @@ def load_chain(sa, lp, mtab, v, rows, k, X, shapes, etas, refr):
         din = (lp.d_in[row, 0], lp.d_in[row, 1], lp.d_in[row, 2])
         dout = (lp.d_in[child, 0], lp.d_in[child, 1], lp.d_in[child, 2])
         refr[j] = dot(din, n_row) * dot(dout, n_row) > 0.0      # travel keeps its side: it crossed
+    return X, shapes, etas, refr
 
 
 @block
-def base_chain(sa, lp, mtab, v, q, cs):
-    """Photon row v's base side (parent q), the same for its four shifts: the slot of ``cs`` that
-    holds its chain (:func:`chain_rows`, :func:`load_chain`) and half-vector targets, loaded on the
-    photon's first shift. Returns (slot, k, row of y_b), k = 0 if the chain does not qualify or
-    the base chain is itself invalid (the shift fails)."""
-    s = v % cs.key.shape[0]
-    if cs.key[s, 0] == v:
-        return s, cs.key[s, 1], cs.key[s, 2]
-    cs.key[s, 0] = v
-    cs.det[s] = math.nan
-    k, b = chain_rows(sa, lp, mtab, q, cs.rows[s])
-    if k > 0:
-        load_chain(sa, lp, mtab, v, cs.rows[s], k, cs.X[s], cs.shapes[s], cs.etas[s], cs.refr[s])
-        ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-        if not M.half_vector_targets(yb_of(lp, b), cs.X[s], ys, cs.shapes[s], cs.etas[s], cs.refr[s], k,
-                                     cs.targets[s], cs.walk.C):
-            k = 0
-    cs.key[s, 1] = k
-    cs.key[s, 2] = b
-    return s, k, b
-
-
-@block
-def base_det(lp, cs, s, k, b, v, n_s):
-    """Eq. 8's ``|dy_{b+1}/dy_s|`` of the base chain in slot s of ``cs``, y_s moving in the plane of
-    normal n_s (y_s's surface, or a volume photon's last segment: the photon's own chart, so the
-    determinant is the same for its four shifts); computed on first use. 0: singular."""
-    if math.isnan(cs.det[s]):
-        ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-        d, ok = M.chain_endpoint_det(yb_of(lp, b), cs.X[s], ys, n_s, cs.shapes[s], cs.etas[s], cs.refr[s],
-                                     cs.targets[s], k, cs.walk)
-        cs.det[s] = d if ok else 0.0
-    return cs.det[s]
-
-
-@block
-def walk_both_ways(yb, X, ys, ye, shapes, etas, refr, targets, k, cs):
-    """Walk the base chain X (y_b .. y_s, half-vector targets ``targets``) to the offset endpoint ye
-    and back: the walk back must find the base chain again (the shift is invertible). True if both
-    walks converged and it did; the offset chain is then in cs.Xo."""
-    Xo, Xb = cs.Xo, cs.Xb
-    for j in range(k):
-        for c in range(3):
-            Xo[j, c] = X[j, c]
-    ok, _, _ = M.manifold_walk(yb, ye, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL,
-                               cs.walk)
+def walk_both_ways(yb, X, ys, ns, ye, ne, shapes, etas, refr, k):
+    """Walk the base chain X (y_b .. y_s) to the offset endpoint ye and back: the walk back must
+    find the base chain again (the shift is invertible). ns, ne: the endpoints' chart normals (the
+    walk holds its endpoint fixed; its derivative probes still move it in that chart). Returns (ok,
+    offset chain X', the base's half-vector targets, which Eq. 8's determinants take)."""
+    targets = np.empty((k, 2))
+    Xo = X.copy()
+    if not M.half_vector_targets(yb, X, ys, shapes, etas, refr, k, targets):
+        return False, Xo, targets
+    ok, _, _ = M.manifold_walk(yb, ye, ne, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
     if not ok:
-        return False
-    for j in range(k):
-        for c in range(3):
-            Xb[j, c] = Xo[j, c]
-    ok, _, _ = M.manifold_walk(yb, ys, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL,
-                               cs.walk)
+        return False, Xo, targets
+    Xb = Xo.copy()
+    ok, _, _ = M.manifold_walk(yb, ys, ns, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
     if not ok:
-        return False
+        return False, Xo, targets
     tol = 1e-7 * M.chain_length_scale(yb, X, ys, k)
     for j in range(k):
         for c in range(3):
             if not abs(Xb[j, c] - X[j, c]) <= tol:
-                return False
-    return True
+                return False, Xo, targets
+    return True, Xo, targets
 
 
 @block
-def offset_det(yb, ye, ne, shapes, etas, refr, targets, k, cs):
-    """Eq. 8's ``|dy'_{b+1}/dy'_s|`` of the offset chain cs.Xo, y'_s moving in the plane of normal ne
-    (0: singular)."""
-    d, ok = M.chain_endpoint_det(yb, cs.Xo, ye, ne, shapes, etas, refr, targets, k, cs.walk)
-    return d if ok else 0.0
+def endpoint_dets(yb, X, ys, ns, Xo, ye, ne, shapes, etas, refr, targets, k):
+    """(ok, det_b, det_o): Eq. 8's ``|dy_{b+1}/dy_s|`` of the base chain and of the offset chain, each
+    endpoint moving in its chart (normal ns, ne: a surface's normal, or a volume photon's last
+    segment)."""
+    det_b, ok_b = M.chain_endpoint_det(yb, X, ys, ns, shapes, etas, refr, targets, k)
+    det_o, ok_o = M.chain_endpoint_det(yb, Xo, ye, ne, shapes, etas, refr, targets, k)
+    return ok_b and ok_o, det_b, det_o
 
 
 @block
-def offset_chain_normals(sa, lp, mtab, rows, k, yb, nb, Xo, r, stack, nrm_o):
+def offset_chain_normals(sa, lp, mtab, rows, k, yb, nb, Xo, r, stack):
     """The offset chain must be what a light path would trace: y_b -> y'_{b+1} .. -> y'_{s-1}, each
-    segment reaching its vertex on the base vertex's shape. True if it is, with per vertex the
-    geometric (0:3) and shading (3:6) normal of the hit in nrm_o (k x 6)."""
+    segment reaching its vertex on the base vertex's shape. Returns (ok, normals): per vertex the
+    geometric (0:3) and shading (3:6) normal of the hit."""
     a, n_a = yb, nb
+    nrm_o = np.empty((k, 6))
     for j in range(k):
         bj = (Xo[j, 0], Xo[j, 1], Xo[j, 2])
         good, pj, ngj, nsj = reaches(sa, a, n_a, bj, r, stack)
         if not (good and _same_row(mtab, pj, lp.prim[rows[k - 1 - j]])):
-            return False
+            return False, nrm_o
         for c in range(3):
             nrm_o[j, c], nrm_o[j, 3 + c] = ngj[c], nsj[c]
         a, n_a = bj, ngj
-    return True
+    return True, nrm_o
 
 
 @block
@@ -310,16 +220,9 @@ def chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, ye, nrm_o, refr, j_area):
 def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     """Shift the surface photon row v (parent q on a specular chain) to the offset photon near
     ``ystar`` (normal ``nstar``), the offset gather point at p2 with kernel radius r. Returns (ok,
-    photon power ratio beta'_s / beta_s per channel, MIS density ratio, arrival direction at y'_s).
-    One call (tests); the camera passes call :func:`manifold_photon_in` with their row's scratch."""
-    return manifold_photon_in(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack, chain_scratch(1))
-
-
-@block
-def manifold_photon_in(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack, cs):
-    """:func:`manifold_photon` in the row's scratch ``cs`` (:class:`ChainScratch`), which keeps the
-    photon's base side for its other shifts."""
-    s, k, b = base_chain(sa, lp, mtab, v, q, cs)
+    photon power ratio beta'_s / beta_s per channel, MIS density ratio, arrival direction at y'_s)."""
+    rows = np.empty(MAX_CHAIN, dtype=np.int64)
+    k, b = chain_rows(sa, lp, mtab, q, rows)
     if k == 0:
         return False, _ZERO, 0.0, _ZERO
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
@@ -332,18 +235,17 @@ def manifold_photon_in(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack, cs):
     if not (ok and same_point(yh, ystar, yq, r)):
         return False, _ZERO, 0.0, _ZERO
     j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
-    X, shapes, etas, refr, targets, rows = cs.X[s], cs.shapes[s], cs.etas[s], cs.refr[s], cs.targets[s], cs.rows[s]
+    X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
     yb = yb_of(lp, b)
-    if not walk_both_ways(yb, X, ys, yh, shapes, etas, refr, targets, k, cs):
+    ok, Xo, targets = walk_both_ways(yb, X, ys, ns_v, yh, ngh, shapes, etas, refr, k)
+    if not ok:
         return False, _ZERO, 0.0, _ZERO
-    det_b = base_det(lp, cs, s, k, b, v, ns_v)
-    det_o = offset_det(yb, yh, ngh, shapes, etas, refr, targets, k, cs)
-    if not (det_b > 0.0 and det_o > 0.0 and j6 > 0.0):
+    ok, det_b, det_o = endpoint_dets(yb, X, ys, ns_v, Xo, yh, ngh, shapes, etas, refr, targets, k)
+    if not (ok and j6 > 0.0):
         return False, _ZERO, 0.0, _ZERO
     j_area = det_o * j6 / det_b                     # Eq. 7: |dy'_{b+1} / dy_{b+1}|
-    Xo, nrm_o = cs.Xo, cs.nrm_o
-    ok = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r, stack,
-                              nrm_o)
+    ok, nrm_o = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
+                                     stack)
     last = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
     n_last = (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2])
     # the last segment reaches y'_s, and (reversibility, Hua et al. 2017 Sec. 4.3) the offset's own
@@ -368,39 +270,32 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     """Shift the volume photon row v, whose parent a = y_{s-1} (``edge``: its recorded edge a -> b,
     :func:`gdlearn.integrators.photon.gvpm_light.base_edge`) lies on a specular chain, to ``b_off``
     (module docstring). Returns what gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per
-    channel, light-side density ratio p(b') / p(b), the direction b' is reached along). One call
-    (tests); the camera passes call :func:`manifold_volume_photon_in` with their row's scratch."""
-    return manifold_volume_photon_in(sa, lp, mtab, v, b_off, edge, r, stack, chain_scratch(1))
-
-
-@block
-def manifold_volume_photon_in(sa, lp, mtab, v, b_off, edge, r, stack, cs):
-    """:func:`manifold_volume_photon` in the row's scratch ``cs`` (:class:`ChainScratch`), which keeps
-    the photon's base side for its other shifts."""
+    channel, light-side density ratio p(b') / p(b), the direction b' is reached along)."""
     st, q, child, n_null, tau_b, logp_b = edge
     if st != OK:                 # the recorded edge itself could not be walked: no densities to compare
         return FAIL, _ZERO, 0.0, _ZERO
-    s, k, b = base_chain(sa, lp, mtab, v, q, cs)
-    if k == 0 or not _in_vacuum(lp, cs.rows[s], k):
+    rows = np.empty(MAX_CHAIN, dtype=np.int64)
+    k, b = chain_rows(sa, lp, mtab, q, rows)
+    if k == 0 or not _in_vacuum(lp, rows, k):
         return FAIL, _ZERO, 0.0, _ZERO
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    X, shapes, etas, refr, targets, rows = cs.X[s], cs.shapes[s], cs.etas[s], cs.refr[s], cs.targets[s], cs.rows[s]
+    X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
     yb = yb_of(lp, b)
-    if not walk_both_ways(yb, X, ys, b_off, shapes, etas, refr, targets, k, cs):
-        return FAIL, _ZERO, 0.0, _ZERO
-    Xo, nrm_o = cs.Xo, cs.nrm_o
-    # each endpoint's chart lies across its own last segment (module docstring): the base's is the
-    # photon's own, the offset's known once the walk has moved y'_{s-1}
+    # each endpoint's chart lies across its own last segment (module docstring); the offset's is
+    # known once the walk has moved y'_{s-1}, so the walk's probes use the base's
     w_b, _ = _dir(yq, ys)
+    ok, Xo, targets = walk_both_ways(yb, X, ys, w_b, b_off, w_b, shapes, etas, refr, k)
+    if not ok:
+        return FAIL, _ZERO, 0.0, _ZERO
     a_o = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
     w_o, l_o = _dir(a_o, b_off)
-    det_b = base_det(lp, cs, s, k, b, v, w_b)
-    det_o = offset_det(yb, b_off, w_o, shapes, etas, refr, targets, k, cs)
-    if not (det_b > 0.0 and det_o > 0.0 and l_o > 0.0):
+    ok, det_b, det_o = endpoint_dets(yb, X, ys, w_b, Xo, b_off, w_o, shapes, etas, refr, targets, k)
+    if not (ok and l_o > 0.0):
         return FAIL, _ZERO, 0.0, _ZERO
-    if not offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
-                                stack, nrm_o):
+    ok, nrm_o = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
+                                     stack)
+    if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     # the last edge a' -> b' through the same null interfaces into the same medium, visible throughout
     n_a = (nrm_o[k - 1, 0], nrm_o[k - 1, 1], nrm_o[k - 1, 2])
@@ -418,14 +313,14 @@ def manifold_volume_photon_in(sa, lp, mtab, v, b_off, edge, r, stack, cs):
 
 
 @inlined
-def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack, cs):
+def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     """The light subpath of volume photon row v moved to ``b_off`` (Gruson et al. 2018, Sec. 4.3):
     reconnected from its parent (:func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge`), or,
-    when the parent is specular, by the manifold walk (:func:`manifold_volume_photon`, in the row's
-    scratch ``cs``). Returns reconnect_edge's tuple and whether the walk completed it. Inlined:
-    G-VPM's and G-BRE's camera passes call it per photon and neighbour."""
+    when the parent is specular, by :func:`manifold_volume_photon`. Returns reconnect_edge's tuple
+    and whether the walk completed it. Inlined: G-VPM's and G-BRE's camera passes call it per photon
+    and neighbour."""
     status, f3, rl, w_in = reconnect_edge(sa, lp, v, b_off, stack, edge)
     if status != FAIL_SPECULAR:
         return status, f3, rl, w_in, False
-    status, f3, rl, w_in = manifold_volume_photon_in(sa, lp, mtab, v, b_off, edge, r, stack, cs)
+    status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack)
     return status, f3, rl, w_in, True

@@ -8,14 +8,11 @@ functions (:func:`make_shift_photons`):
   depend on the neighbour -- its parent and the parent's value towards the base direction (GPM:
   ``gpm_light.parent_base``), and through media the recorded edge's transmittance -- computed once
   per photon for its four shifts;
-* ``shift(sa, lp, mtab, prm, v, state, base, off, r, cs, stack) -> (status, term, ratio)``: the shift
-  to one offset gather point ``off`` = (p', ng', frame', wi', mat') from ``base`` = (p, frame): the
+* ``shift(sa, lp, mtab, prm, v, state, base, off, r, stack) -> (status, term, ratio)``: the shift to
+  one offset gather point ``off`` = (p', ng', frame', wi', mat') from ``base`` = (p, frame): the
   outcome (``RECONNECTED``, ``FAILED``, ``MANIFOLD``), the photon term at the offset
   before the camera weight (f Phi / ``|cos_g|``, :func:`at_offset`), and the MIS density ratio
-  p'/p of the light side (the camera side, a replayed path, contributes 1). ``cs`` is the row's
-  scratch of the manifold branch
-  (:class:`gdlearn.integrators.photon.photon_manifold.ChainScratch`), which also keeps a photon's
-  chain from one shift to the next.
+  p'/p of the light side (the camera side, a replayed path, contributes 1).
 
 The loop sums the pixel's nine buffers (L, D_k, S_k; :mod:`gdlearn.integrators.gradients`) in a row
 scratch term by term in photon order and writes them once, and counts the shifts in integers: the
@@ -174,14 +171,14 @@ def _copy9(dst, src):
 def make_shift_photons(photon_base, shift):
     """The per-photon loop for one photon shift (``photon_base``, ``shift``: the module docstring's
     contract), compiled per shift: ``loop(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs,
-    acc, cs, stack)`` adds the base gather point ``gp`` = (p, ng, frame, wi, material row, camera weight,
+    acc, stack)`` adds the base gather point ``gp`` = (p, ng, frame, wi, material row, camera weight,
     class, camera vertices)'s photons cand[:n] -- their base terms and their shifts to the offset
     gather points ``offs`` (:func:`offset_point`) -- to half hh of pixel (y, x) of ``out`` (a
     ``gpm_gather.GpmOut``), sets its M, and returns the number of non-finite base terms dropped.
-    ``acc`` is a (9, 3) row scratch, ``cs`` the manifold branch's (``shift``'s)."""
+    ``acc`` is a (9, 3) row scratch."""
 
     @block
-    def shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, cs, stack):
+    def shift_photons(sa, lp, mtab, prm, out, hh, y, x, gp, r, cand, n, offs, acc, stack):
         p, ng, frame, wi, mid, beta, state, m = gp
         mat = sa.materials[mid]
         o_ok = offs[0]
@@ -210,7 +207,7 @@ def make_shift_photons(photon_base, shift):
                 if o_ok[k]:
                     p2, ng2, fr2, wi2, mid2, beta2 = offset_point(offs, k)
                     status, term, ratio = shift(sa, lp, mtab, prm, v, pb, (p, frame),
-                                                (p2, ng2, fr2, wi2, sa.materials[mid2]), r, cs, stack)
+                                                (p2, ng2, fr2, wi2, sa.materials[mid2]), r, stack)
                     status, c_o = _weighted(status, term, beta2, ratio)
                 counts[status] += 1
                 _add_shift(acc, k, status, c_o, c_b, ratio)
