@@ -14,6 +14,13 @@ from pathlib import Path
 
 import pytest
 
+# Two pytest-xdist workers share two cores, each running numba's OpenMP loops on two threads: GNU
+# OpenMP's default lets a thread that waits at a barrier spin, taking the core the other worker's
+# thread needs. Passive waiting sleeps at once. Set before numba loads its threading layer (the first
+# parallel loop); the chapters' kernels, started by the book build, inherit it.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 ROOT = Path(__file__).resolve().parent.parent
 BOOK = ROOT / "book"
 #: Seconds one cell may run in quick mode before the test fails (quick chapters take ~10-60 s in all).
