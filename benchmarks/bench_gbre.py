@@ -21,13 +21,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from benchmarks.bench_gvpm import SCENES, interleaved_times, shift_line  # noqa: E402
+from benchmarks.bench_gvpm import SCENES, interleaved_times, old_vs_new, shift_line  # noqa: E402
 from gdlearn.integrators import make  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
@@ -47,8 +45,6 @@ def pass_times(path, kernel, a) -> None:
 
 def kernel_times(path, kernel, a) -> None:
     """Old and new camera pass on the same photons and radius, interleaved (module docstring)."""
-    import numpy as np
-
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
     import _gbre_reference as ref
     from gdlearn.integrators.photon import gbre_gather as gb
@@ -62,22 +58,14 @@ def kernel_times(path, kernel, a) -> None:
     lp, bbhs, r, _ = g.build(g.trace_photons(1))
     kernels = {"old": lambda sa, lp, bbhs, *rest: ref.reference_rows(sa, lp, bbhs, *rest),
                "new": lambda sa, lp, bbhs, *rest: gb.gbre_rows(sa, lp, bbhs, g.mtab, *rest)}
-    times = {n: [] for n in kernels}
-    outs = {}
-    for i in range(a.repeats + 1):
-        for n, rows in kernels.items():
-            out = gg.allocate(g.height, g.width)
-            t0 = time.perf_counter()
-            with g.setup.parallel(g.height):
-                rows(g.setup.sa, lp, bbhs, float(r), g.gather_params, g.gp, g.wsub, g.seed, 2, out)
-            if i > 0:                       # the first round compiles the reference kernel
-                times[n].append(time.perf_counter() - t0)
-            outs[n] = out
-    same = all(np.array_equal(x, y) for x, y in zip(outs["old"], outs["new"]))
-    med = {n: statistics.median(v) for n, v in times.items()}
-    print(f"{os.path.basename(path):18s} {kernel} kernel old {med['old']:6.3f} s (min {min(times['old']):.3f})  new "
-          f"{med['new']:6.3f} s (min {min(times['new']):.3f})  old/new {med['old'] / med['new']:5.2f}  "
-          f"array-equal {same}  load average {load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
+
+    def call(rows, out):
+        with g.setup.parallel(g.height):
+            rows(g.setup.sa, lp, bbhs, float(r), g.gather_params, g.gp, g.wsub, g.seed, 2, out)
+
+    line, _ = old_vs_new(kernels, call, lambda: gg.allocate(g.height, g.width), a.repeats)
+    print(f"{os.path.basename(path):18s} {kernel} {line}  load average {load0:.2f} -> {os.getloadavg()[0]:.2f}",
+          flush=True)
 
 
 def main(argv=None) -> int:

@@ -40,12 +40,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from benchmarks.bench_gvpm import interleaved_times, old_vs_new  # noqa: E402
 from gdlearn.integrators import make  # noqa: E402
 from gdlearn.scene.load import load  # noqa: E402
 
@@ -55,18 +54,7 @@ SCENES = "scenes/cornell-box.xml,scenes/caustics-box.xml,scenes/caustic-closeup.
 def pass_times(path, a) -> None:
     scene = load(path, res=a.res)
     integs = {n: make(n, scene, seed=0, photons_per_pass=a.photons, threads=a.threads) for n in ("sppm", "gpm")}
-    for integ in integs.values():
-        integ.compile()
-    times = {n: [] for n in integs}
-    last = {}
-    for i in range(a.repeats + 1):
-        for n, integ in integs.items():
-            t0 = time.perf_counter()
-            res = integ.render_pass(i)
-            if i > 0:                       # the first pass also measures the initial radii
-                times[n].append(time.perf_counter() - t0)
-            last[n] = res
-    med = {n: statistics.median(v) for n, v in times.items()}
+    med, last = interleaved_times(integs, a.repeats)     # the first pass also measures the initial radii
     st = last["gpm"].stats
     ok, fail, mani = st["photon_shifts_reconnected"], st["photon_shifts_failed"], st["photon_shifts_manifold"]
     tot = max(ok + fail + mani, 1)
@@ -92,24 +80,15 @@ def kernel_times(path, a) -> None:
     lp, grids = g.build(g.trace_photons(1))
     radius = np.sqrt(g.r2)
     kernels = {"old": ref.reference_rows, "new": gg.gpm_rows}
-    times = {n: [] for n in kernels}
-    outs = {}
-    for i in range(a.repeats + 1):
-        for n, rows in kernels.items():
-            out = gg.allocate(g.height, g.width)
-            t0 = time.perf_counter()
-            with g.setup.parallel(g.height):
-                rows(g.setup.sa, lp, grids, g.mtab, g.gather_params, g.seed, 2, radius, out)
-            if i > 0:                       # the first round compiles the reference kernel
-                times[n].append(time.perf_counter() - t0)
-            outs[n] = out
-    same = all(np.array_equal(x, y) for x, y in zip(outs["old"], outs["new"]))
-    med = {n: statistics.median(v) for n, v in times.items()}
+
+    def call(rows, out):
+        with g.setup.parallel(g.height):
+            rows(g.setup.sa, lp, grids, g.mtab, g.gather_params, g.seed, 2, radius, out)
+
+    line, outs = old_vs_new(kernels, call, lambda: gg.allocate(g.height, g.width), a.repeats)
     c = outs["new"].count.sum(axis=(0, 2, 3))
-    print(f"{os.path.basename(path):22s} kernel old {med['old']:6.3f} s (min {min(times['old']):.3f})  new "
-          f"{med['new']:6.3f} s (min {min(times['new']):.3f})  old/new {med['old'] / med['new']:5.2f}  "
-          f"array-equal {same}  shifts {int(c.sum())} (manifold {int(c[gg.MANIFOLD])})  load average "
-          f"{load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
+    print(f"{os.path.basename(path):22s} {line}  shifts {int(c.sum())} (manifold {int(c[gg.MANIFOLD])})  load "
+          f"average {load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
 
 
 def equal_time_study(a) -> int:

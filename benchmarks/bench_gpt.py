@@ -220,16 +220,15 @@ def print_equal_time(files, refs, a):
                            executor="serial", count=6, first=a.seconds / 10, spp_per_pass=2)
         vs_pt = study.equal_time_ratios("pt")
         vs_rep = {s: study.equal_time_ratios(f"gpt-replay+{s}") for s in a.solvers}
-        floor = refs[name].floor
-        pt_err = np.mean([r["relmse"] for r in study.select(True, method="pt", scene=name)])
+        own = study.equal_time_ratios("pt", less_floor=True)
         for m in methods:
             fin = study.select(True, method=m.label, scene=name)
             err = [r["relmse"] for r in fin]
             rep = (f"{vs_rep[m.solver][(m.label, name)]:13.2f}x" if m.estimator == "gpt" else f"{'':14s}")
             print(f"{name:15s} {m.label:44s} {np.mean([r['spp'] for r in fin]):6.0f} {np.mean(err):10.3e} "
                   f"{min(err):10.2e}..{max(err):9.2e} {vs_pt[(m.label, name)]:9.2f}x {rep} "
-                  f"{(pt_err - floor) / (np.mean(err) - floor):20.2f}x", flush=True)
-        print(f"{name:15s} reference noise floor {floor:.2e} (in every relMSE above; the last column "
+                  f"{own[(m.label, name)]:20.2f}x", flush=True)
+        print(f"{name:15s} reference noise floor {refs[name].floor:.2e} (in every relMSE above; the last column "
               f"subtracts it from both)")
 
 

@@ -65,6 +65,30 @@ def interleaved_times(integs: dict, repeats: int):
     return {n: statistics.median(v) for n, v in times.items()}, last
 
 
+def old_vs_new(kernels: dict, call, allocate, repeats: int):
+    """Time a camera pass's kernels ``{"old": .., "new": ..}`` on the same inputs, interleaved (old,
+    new, old, ...: both see the same load), the first round untimed (it compiles the frozen
+    reference kernel of tests/). ``call(rows, out)`` runs one kernel into ``out = allocate()``.
+    Returns (a line: medians, minima, their ratio, whether every buffer of the two is equal; the
+    last outputs per name)."""
+    import numpy as np
+
+    times = {n: [] for n in kernels}
+    outs = {}
+    for i in range(repeats + 1):
+        for n, rows in kernels.items():
+            out = allocate()
+            t0 = time.perf_counter()
+            call(rows, out)
+            if i > 0:
+                times[n].append(time.perf_counter() - t0)
+            outs[n] = out
+    same = all(np.array_equal(x, y) for x, y in zip(outs["old"], outs["new"]))
+    med = {n: statistics.median(v) for n, v in times.items()}
+    return (f"kernel old {med['old']:6.3f} s (min {min(times['old']):.3f})  new {med['new']:6.3f} s (min "
+            f"{min(times['new']):.3f})  old/new {med['old'] / med['new']:5.2f}  array-equal {same}"), outs
+
+
 def shift_line(name: str, res) -> str:
     """The stage split and photon-shift statistics of a gradient pass (per gathered photon and neighbour)."""
     st = res.stats
