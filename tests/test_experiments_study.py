@@ -83,6 +83,24 @@ def test_ratios_less_the_reference_floor():
         st.equal_time_ratios("a", metric="mse", less_floor=True)
 
 
+def test_merged_study_compares_a_method_run_on_one_scene_only():
+    """A method run on one scene (merged in from a second study) is compared with that scene's
+    baseline, and has no ratio -- and raises no empty-mean warning -- on the scene it did not run on."""
+    def recs(method, scene, err):
+        return [{"method": method, "scene": scene, "seed": 0, "final": True, "relmse": err}]
+    both = S.Study(recs("a", "s", 1.0) + recs("a", "t", 2.0) + recs("b", "s", 0.5) + recs("b", "t", 0.5),
+                   images={("a", "s", 0): np.zeros(1)})
+    one = S.Study(recs("c", "t", 0.25), images={("c", "t", 0): np.ones(1)})
+    st = both.merge(one)
+    with np.errstate(all="raise"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            r = st.equal_time_ratios("a")
+    assert r == {("a", "s"): 1.0, ("b", "s"): 2.0, ("a", "t"): 1.0, ("b", "t"): 4.0, ("c", "t"): 8.0}
+    assert set(st.images) == {("a", "s", 0), ("c", "t", 0)} and len(both.records) == 4
+
+
 def test_csv_has_every_column(serial, tmp_path):
     path = serial.to_csv(tmp_path / "r.csv")
     rows = list(csv.DictReader(open(path)))

@@ -190,6 +190,13 @@ class Study:
             w.writerows(self.records)
         return path
 
+    def merge(self, other: "Study") -> "Study":
+        """This study and ``other`` as one (records, images, references, snapshots), e.g. a method
+        run on one scene only beside the methods run on all: ratios then compare it with the
+        baseline of its scene. ``other`` wins where both have an image under the same key."""
+        return Study(self.records + other.records, {**self.images, **other.images},
+                     {**self.references, **other.references}, {**self.snapshots, **other.snapshots})
+
     def time_to_reach(self, target: float, metric: str = "relmse") -> dict[tuple, float]:
         """(method, scene, seed) -> first time its ``metric`` curve reaches ``target`` (NaN if never)."""
         out = {}
@@ -216,6 +223,8 @@ class Study:
         for scene in self.scenes():
             b = self._mean_final(baseline, scene, metric, less_floor)
             for m in self.methods():
+                if not self.select(True, method=m, scene=scene):
+                    continue                    # a method that did not run on this scene
                 e = self._mean_final(m, scene, metric, less_floor)
                 out[(m, scene)] = float(b / e) if e > 0 and b > 0 else float("nan")
         return out
