@@ -26,12 +26,36 @@ from gdlearn.integrators import make, render
 from gdlearn.integrators.path.gpt_surface.vertex import BROKEN_HV_JACOBIAN, BROKEN_JACOBIAN, BROKEN_MIS, BROKEN_UNPAIRED
 from gdlearn.scene.load import load
 from gdlearn.scene.model import BSDF, rgb
+from gdlearn.shifts.policy import POLICIES, stats_dict
 
 ROOT = __file__.rsplit("/tests/", 1)[0]
 RES = 16
 N_SEEDS = 32
 SPP = 8
 PILOT_SPP = 128
+
+
+@pytest.mark.parametrize("effects", ["direct", "diffuse-interreflection,glossy"])
+def test_walk_left_out_only_where_it_changes_nothing_rendered(effects):
+    """Where the request renders neither specular nor caustic paths, ``select_kernel`` runs
+    halfvector+reconnection for the manifold policy. That is the same image, because only paths of
+    those classes can cross a walked chain: forcing the manifold kernel gives the same buffers."""
+    from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, gpt_manifold_rows, gpt_rows
+    from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
+    sc = _scene("caustics-box")
+    plain = make("gpt", sc, seed=4, spp_per_pass=4, shift=MANIFOLD_POLICY, effects=effects, max_depth=6)
+    assert plain.kernel is gpt_rows
+    forced = make("gpt", sc, seed=4, spp_per_pass=4, shift=MANIFOLD_POLICY, effects=effects, max_depth=6)
+    forced.kernel, forced.extra = gpt_manifold_rows, (manifold_table(forced.setup.scene, forced.setup.sa),)
+    forced.policy = POLICIES[MANIFOLD_POLICY]
+    a, st_a, _ = plain.trace(0, 4)
+    b, st_b, _ = forced.trace(0, 4)
+    assert np.abs(a).max() > 0
+    np.testing.assert_array_equal(a, b)
+    # with paths long enough for chains, the forced kernel did walk them: the equality is not vacuous
+    if effects != "direct":
+        assert stats_dict(st_b)["manifold"]["run"] > 0
+    assert make("gpt", sc, shift=MANIFOLD_POLICY, max_depth=6).kernel is gpt_manifold_rows
 
 
 def _scene(name):
@@ -166,7 +190,7 @@ def test_primal_is_the_path_tracer_without_roulette():
     """The base paths are pt's, sample for sample (same random numbers); only Russian roulette differs
     (gpt takes max(base, offset) throughput), so with roulette off the primal is pt's up to rounding."""
     sc = _scene("caustics-box")
-    g = make("gpt", sc, seed=3, spp_per_pass=2)
+    g = make("gpt", sc, seed=3, spp_per_pass=2, shift="halfvector+reconnection+manifold")
     p = make("pt", sc, seed=3, spp_per_pass=2)
     g.setup.rr_depth = p.setup.rr_depth = 1 << 20
     a, b = render(g, spp=4).images["primal_base"], render(p, spp=4).primal
@@ -178,7 +202,7 @@ def test_stats_and_hard_cases_stay_finite():
     """Deep caustic paths (glass + mirror, max_depth 12): every image finite, no sample dropped as
     non-finite, each shift kind ran, failures counted, borders undefined (zero)."""
     sc = _scene("caustics-box")
-    f = render(make("gpt", sc, seed=11, spp_per_pass=4, max_depth=12), spp=8)
+    f = render(make("gpt", sc, seed=11, spp_per_pass=4, max_depth=12, shift="halfvector+reconnection+manifold"), spp=8)
     for name in ("primal", "primal_base", "gx", "gy"):
         assert np.all(np.isfinite(f.images[name]))
     assert f.stats["nonfinite_samples"] == 0
@@ -213,19 +237,22 @@ def test_media_dispatch_to_the_volume_kernel():
     assert make("gpt", _scene("cornell-box")).kernel is gpt_rows
 
 
-def test_default_policy_follows_the_effects_plan():
-    """shift=None: manifold exploration where the plan renders caustics through specular chains (and the
-    scene has analytic specular shapes, no media), halfvector+reconnection elsewhere; the CLI offers
-    every supported policy."""
+def test_default_policy_and_the_manifold_walk_follow_the_plan():
+    """shift=None: halfvector+replay+reconnection everywhere (manifold exploration lost at equal time on
+    the glass scenes: gpt.DEFAULT_RULE); asked for, the manifold walk compiles only where the plan
+    renders specular chains over analytic specular shapes; the CLI offers every supported policy."""
     from gdlearn.commands.render import SHIFT_CHOICES
     from gdlearn.integrators.path.gpt import DEFAULT_POLICY, MANIFOLD_POLICY, SUPPORTED
     assert SHIFT_CHOICES == SUPPORTED and MANIFOLD_POLICY in SUPPORTED
     caustics = _scene("caustics-box")
     g = make("gpt", caustics)
-    assert g.shift == MANIFOLD_POLICY and g.manifold
-    # asking for direct light only renders no caustic: no manifold code
-    g = make("gpt", caustics, effects="direct")
     assert g.shift == DEFAULT_POLICY and not g.manifold
+    g = make("gpt", caustics, shift=MANIFOLD_POLICY)
+    assert g.shift == MANIFOLD_POLICY and g.manifold
+    # asking for direct light only renders no caustic: the walk would never run, so it is not compiled
+    g = make("gpt", caustics, shift=MANIFOLD_POLICY, effects="direct")
+    assert not g.manifold and g.policy == POLICIES["halfvector+reconnection"]
+    assert not make("gpt", _scene("cornell-box"), shift=MANIFOLD_POLICY).manifold
     assert make("gpt", _scene("cornell-box")).shift == DEFAULT_POLICY
     assert make("gpt", load(f"{ROOT}/scenes/fog-box.xml", res=RES)).shift == DEFAULT_POLICY
     assert make("gpt", caustics, shift="replay").shift == "replay"

@@ -54,8 +54,8 @@ def add_parser(subparsers) -> None:
                         "(default none: the primal image)")
     p.add_argument("--shift", default=None, choices=SHIFT_CHOICES + VOLUME_SHIFT_CHOICES, metavar="POLICY",
                    help="gpt: shift-mapping policy, one of " + ", ".join(SHIFT_CHOICES) + " (default: "
-                        "manifold exploration where the effects plan renders caustics through specular chains the "
-                        "walk can move, else halfvector+replay+reconnection); gvpm/gbre: the photon shift, mixed "
+                        "halfvector+replay+reconnection; halfvector+reconnection+manifold walks specular chains where "
+                        "the effects plan renders them, at a higher cost per sample); gvpm/gbre: the photon shift, mixed "
                         "(default, Gruson et al. 2018 Eq. 16; gbre --kernel 3d) or simple (gbre --kernel 2d: the "
                         "ray-frame copy, its default)")
     # photon estimators (sppm, ppm, vpm, bre); a pass takes 2 camera samples per pixel, so --spp counts passes too

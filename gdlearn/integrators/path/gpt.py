@@ -23,7 +23,8 @@ two non-connectable vertices; fail only where the backward shift would reconnect
 between connectable vertices, :mod:`!gdlearn.integrators.path.gpt_surface.manifold`). The manifold walk runs only where
 the effects plan has specular chains and the scene has analytic specular shapes (``self.manifold``);
 elsewhere that policy is halfvector+reconnection. Default (``shift=None``): :func:`default_policy` --
-:data:`DEFAULT_RULE`, with the measurements in benchmarks/README.md. Scenes with media or
+:data:`DEFAULT_RULE`; manifold exploration is asked for by name (the measurements are in
+benchmarks/README.md, "Which policy by default"). Scenes with media or
 null interfaces run the twin kernel :func:`!gdlearn.integrators.path.gpt_volume.lockstep.gpt_volume_rows` (same
 signature and buffers), imported lazily; it has no manifold walk.
 
@@ -58,15 +59,24 @@ from gdlearn.kernels.jit import block, rows
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
 SUPPORTED = ("replay", "replay+reconnection", "halfvector+reconnection", "halfvector+reconnection+manifold",
              "halfvector+replay+reconnection")
-#: the default wherever the manifold walk does not run: the mixed half-vector policy (on scenes without
-#: glossy or specular vertices it runs exactly replay+reconnection's shifts); the measurements behind the
-#: choice (gradient error at equal samples, equal-time relMSE per scene) are in benchmarks/README.md, bench_gpt
+#: the default policy on every surface scene: the mixed half-vector policy (on scenes without glossy or
+#: specular vertices it runs exactly replay+reconnection's shifts); the measurements behind the choice
+#: (gradient error at equal samples, equal-time relMSE per scene) are in benchmarks/README.md, bench_gpt
 DEFAULT_POLICY = "halfvector+replay+reconnection"
 #: what :func:`default_policy` does, in words (the book quotes it)
-DEFAULT_RULE = ("By default gpt takes manifold exploration where the scene's effects plan renders caustics "
-                "through specular chains the walk can move (analytic shapes, no media), and "
-                "halfvector+replay+reconnection everywhere else.")
+DEFAULT_RULE = ("By default gpt takes halfvector+replay+reconnection on every scene; manifold exploration "
+                "(halfvector+reconnection+manifold) runs only when asked for, and then only where the effects "
+                "plan renders specular chains the walk can move (analytic shapes, no media). At equal time "
+                "(128 x 128 pixels, 20 s, 3 seeds) the walk's cost per sample outweighed its better shifts on "
+                "the glass scenes: the caustics box and the glass ball's close-up had 2.5-3.2 times the "
+                "relMSE with it, the close-up also with the caustics alone requested; only the mirror "
+                "sphere's caustic gained from it, by 1.14 times, and its kernel takes a minute and a half "
+                "longer to compile.")
 MANIFOLD_POLICY = "halfvector+reconnection+manifold"
+#: the classes (kernels.pathclass) of every surface path that has crossed a specular chain between two
+#: connectable vertices (or a connectable vertex and the light): it has a specular vertex and at least
+#: two interior ones. The manifold walk changes contributions of these classes only.
+CHAIN_CLASSES = ("specular", "caustics")
 
 
 @block
@@ -158,8 +168,10 @@ def select_kernel(setup, code: int):
     :class:`~gdlearn.integrators.setup.SceneSetup`, the arguments it takes after the common ones, and
     the policy code it runs. Whole-path replay has a kernel of its own (surfaces or media); media and
     null interfaces take the volume kernel; the manifold policy takes the manifold kernel where the
-    effects plan has specular chains and the walk has an analytic shape to move, else it *is*
-    ``halfvector+reconnection`` (the manifold code would not run: the same estimator)."""
+    effects plan renders a class whose paths can cross a specular chain between connectable vertices
+    (:data:`CHAIN_CLASSES`) and the walk has an analytic shape to move, else it *is*
+    ``halfvector+reconnection``: a walk could change only contributions of classes not rendered, so
+    the image is the same estimator's."""
     if code == POLICY_REPLAY:
         return gpt_replay_policy_rows, (_has_null_or_media(setup),), code
     if _has_null_or_media(setup):
@@ -168,22 +180,19 @@ def select_kernel(setup, code: int):
                              "halfvector+reconnection")
         return gpt_volume_rows, (), code
     if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
+        chains = setup.plan.specular_chains and any(c in setup.plan.names for c in CHAIN_CLASSES)
         mtab = manifold_table(setup.scene, setup.sa)
-        if setup.plan.specular_chains and np.any(mtab[:, 0] >= 0.0):
+        if chains and np.any(mtab[:, 0] >= 0.0):
             return gpt_manifold_rows, (mtab,), code
         return gpt_rows, (), POLICY_HALFVECTOR_RECONNECTION
     return gpt_rows, (), code
 
 
 def default_policy(setup) -> str:
-    """The policy ``shift=None`` picks for a :class:`~gdlearn.integrators.setup.SceneSetup` (its scene,
-    plan and compiled arrays; :data:`DEFAULT_RULE`): :data:`!MANIFOLD_POLICY` where the effects plan renders caustics
-    through specular chains, the scene has no media and at least one analytic specular shape the walk
-    can move, else :data:`!DEFAULT_POLICY` (measurements in benchmarks/README.md). The plan decides:
-    ``--effects direct`` on a caustic scene renders no caustic, so no manifold code runs."""
-    if setup.plan.specular_chains and "caustics" in setup.plan.names and not _has_null_or_media(setup):
-        if np.any(manifold_table(setup.scene, setup.sa)[:, 0] >= 0.0):
-            return MANIFOLD_POLICY
+    """The policy ``shift=None`` picks for a :class:`~gdlearn.integrators.setup.SceneSetup`:
+    :data:`DEFAULT_POLICY` (:data:`DEFAULT_RULE` says why). ``setup`` is the scene, plan and compiled
+    arrays a rule can look at; the measured one needs none of them. Where manifold exploration is
+    asked for, ``select_kernel`` lets the effects plan decide whether the walk is compiled at all."""
     return DEFAULT_POLICY
 
 
