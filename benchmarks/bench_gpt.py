@@ -191,7 +191,8 @@ PT_SOURCES = ("kernels", "scene", "integrators/base.py", "integrators/path/pt.py
 
 
 def pt_reference(sf, a):
-    return render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64, sources=PT_SOURCES)
+    fx = {"effects": a.effects} if getattr(a, "effects", None) else {}
+    return render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64, sources=PT_SOURCES, **fx)
 
 
 def references(files, a):
@@ -205,17 +206,19 @@ def references(files, a):
 
 
 def print_equal_time(files, refs, a):
-    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.et_seeds} seeds, reference pt {a.ref_spp} spp")
+    print(f"\n## equal time: {a.seconds:.1f} s per run, {a.et_seeds} seeds, reference pt {a.ref_spp} spp"
+          + (f", effects {a.effects}" if a.effects else ""))
     print(f"{'scene':15s} {'method':44s} {'spp':>6s} {'relMSE':>10s} {'min..max over seeds':>22s} "
           f"{'pt/method':>10s} {'replay/method':>14s} {'pt/method less floor':>21s}")
+    fx = (("effects", a.effects),) if a.effects else ()       # the request of every run and the reference
     for name, sf in files.items():            # per scene: the policies gpt runs there (a.ok)
-        methods = [Method.parse("pt")] + [Method.parse(f"gpt-replay+{s}") for s in a.solvers]
+        methods = [Method("pt", "pt", None, fx)] + [Method(f"gpt-replay+{s}", "gpt-replay", s, fx) for s in a.solvers]
         for p in a.et_policies:
             if p == "default":
-                methods += [Method(f"gpt[default: {make('gpt', sf.load()).shift}]+{s}", "gpt", s)
+                methods += [Method(f"gpt[default: {make('gpt', sf.load()).shift}]+{s}", "gpt", s, fx)
                             for s in a.solvers]
             elif p in a.ok[name]:
-                methods += [Method(f"gpt[{p}]+{s}", "gpt", s, (("shift", p),)) for s in a.solvers]
+                methods += [Method(f"gpt[{p}]+{s}", "gpt", s, (("shift", p),) + fx) for s in a.solvers]
         study = equal_time(methods, [sf], seconds=a.seconds, seeds=a.et_seeds, references=refs,
                            executor="serial", count=6, first=a.seconds / 10, spp_per_pass=2)
         vs_pt = study.equal_time_ratios("pt")
@@ -264,6 +267,8 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--grad-spp", type=int, default=16)
     ap.add_argument("--solvers", nargs="+", default=["l1", "l2"])
+    ap.add_argument("--effects", default=None,
+                    help="effects request of the equal-time study: every run and its reference (default: all)")
     ap.add_argument("--no-equal-time", action="store_true")
     ap.add_argument("--ratios", action="store_true",
                     help="only issue 20's table: CPU time per sample of gpt and gpt-replay over pt on every "
