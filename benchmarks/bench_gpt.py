@@ -191,7 +191,7 @@ PT_SOURCES = ("kernels", "scene", "integrators/base.py", "integrators/path/pt.py
 
 
 def pt_reference(sf, a):
-    fx = {"effects": a.effects} if getattr(a, "effects", None) else {}
+    fx = {"effects": a.effects} if a.effects else {}
     return render_reference(sf, "pt", spp=a.ref_spp, spp_per_pass=64, sources=PT_SOURCES, **fx)
 
 

@@ -2,6 +2,7 @@
 pool, Dask LocalCluster), ratios and time-to-reach, CSV, the compare command."""
 import argparse
 import csv
+import warnings
 
 import numpy as np
 import pytest
@@ -92,11 +93,9 @@ def test_merged_study_compares_a_method_run_on_one_scene_only():
                    images={("a", "s", 0): np.zeros(1)})
     one = S.Study(recs("c", "t", 0.25), images={("c", "t", 0): np.ones(1)})
     st = both.merge(one)
-    with np.errstate(all="raise"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            r = st.equal_time_ratios("a")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # numpy's empty-mean RuntimeWarning fails the test
+        r = st.equal_time_ratios("a")
     assert r == {("a", "s"): 1.0, ("b", "s"): 2.0, ("a", "t"): 1.0, ("b", "t"): 4.0, ("c", "t"): 8.0}
     assert set(st.images) == {("a", "s", 0), ("c", "t", 0)} and len(both.records) == 4
 

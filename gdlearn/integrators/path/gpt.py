@@ -180,10 +180,10 @@ def select_kernel(setup, code: int):
                              "halfvector+reconnection")
         return gpt_volume_rows, (), code
     if code == POLICY_HALFVECTOR_RECONNECTION_MANIFOLD:
-        chains = setup.plan.specular_chains and any(c in setup.plan.names for c in CHAIN_CLASSES)
-        mtab = manifold_table(setup.scene, setup.sa)
-        if chains and np.any(mtab[:, 0] >= 0.0):
-            return gpt_manifold_rows, (mtab,), code
+        if setup.plan.specular_chains and any(c in setup.plan.names for c in CHAIN_CLASSES):
+            mtab = manifold_table(setup.scene, setup.sa)
+            if np.any(mtab[:, 0] >= 0.0):
+                return gpt_manifold_rows, (mtab,), code
         return gpt_rows, (), POLICY_HALFVECTOR_RECONNECTION
     return gpt_rows, (), code
 
