@@ -119,6 +119,8 @@ def _pilot(name):
                                                 ("glossy", "halfvector+reconnection", None),
                                                 ("glossy", "replay+reconnection", None),
                                                 ("mesh", "replay+reconnection", None),
+                                                # the default policy on rough plastic and rough metal
+                                                ("glossy-box", "halfvector+replay+reconnection", None),
                                                 ("caustics-box", "replay+reconnection", "caustics"),
                                                 # each path's own class decides: an offset's
                                                 # class may differ from its base's

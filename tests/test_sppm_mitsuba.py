@@ -33,6 +33,7 @@ CASES = {c.name: c for c in store.reference_cases()}
 #: scene -> (light paths per pass, passes); the caustic close-up is a caustic everywhere and needs
 #: 4x the photons of the others for the same image-mean noise (measured: 0.4 % vs 2 % sd at 100k)
 BUDGET = {"cornell-box": (100_000, 40), "mesh": (100_000, 40), "caustics-box": (100_000, 40),
+          "glossy-box": (100_000, 40),
           "mirror-caustic": (100_000, 40), "caustic-closeup": (400_000, 32)}
 
 
