@@ -84,6 +84,20 @@ def test_ratios_less_the_reference_floor():
         st.equal_time_ratios("a", metric="mse", less_floor=True)
 
 
+def test_seed_ratios_pair_the_seeds():
+    # b's error is a's over 2 on seed 0 and over 8 on seed 1: the paired ratios are 2 and 8 (the
+    # ratio of the means, 5.0 / 1.125 = 4.44, is neither); c ran on seed 1 only
+    recs = [{"method": m, "scene": "s", "seed": sd, "final": True, "relmse": e}
+            for m, errs in (("a", (1.0, 4.0)), ("b", (0.5, 0.5))) for sd, e in enumerate(errs)]
+    recs.append({"method": "c", "scene": "s", "seed": 1, "final": True, "relmse": 2.0})
+    recs.append({"method": "a", "scene": "s", "seed": 0, "final": False, "relmse": 9.0})
+    st = S.Study(recs)
+    np.testing.assert_array_equal(st.seed_ratios("a", "b", "s"), [2.0, 8.0])
+    np.testing.assert_array_equal(st.seed_ratios("a", "c", "s"), [2.0])
+    with pytest.raises(KeyError, match="no final records"):
+        st.seed_ratios("a", "d", "s")
+
+
 def test_merged_study_compares_a_method_run_on_one_scene_only():
     """A method run on one scene (merged in from a second study) is compared with that scene's
     baseline, and has no ratio -- and raises no empty-mean warning -- on the scene it did not run on."""

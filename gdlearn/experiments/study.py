@@ -229,6 +229,19 @@ class Study:
                 out[(m, scene)] = float(b / e) if e > 0 and b > 0 else float("nan")
         return out
 
+    def seed_ratios(self, baseline: str, method: str, scene: str, metric: str = "relmse") -> np.ndarray:
+        """Final ``metric`` of ``baseline`` / that of ``method`` on ``scene``, one ratio per seed both
+        ran, in seed order: the spread of :meth:`equal_time_ratios`. The ratios are paired by seed
+        because methods that share a seed share their base samples (gpt's base paths are pt's), so
+        the per-seed ratio varies far less than either error does."""
+        def finals(m):
+            return {r["seed"]: r[metric] for r in self.select(True, method=m, scene=scene)}
+        b, e = finals(baseline), finals(method)
+        if not b or not e:
+            raise KeyError(f"no final records of {baseline!r} and {method!r} on {scene!r}; "
+                           f"methods {self.methods()}, scenes {self.scenes()}")
+        return np.array([b[sd] / e[sd] for sd in sorted(set(b) & set(e))])
+
     def _mean_final(self, method, scene, metric, less_floor):
         recs = self.select(True, method=method, scene=scene)
         e = float(np.mean([r[metric] for r in recs]))
