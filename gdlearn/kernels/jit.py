@@ -32,7 +32,9 @@ decorator                 use it for
                           are typed per call site (a tuple of arrays of varying layout) or that
                           return small tuples the caller unpacks.
 :func:`rows`              a parallel row driver (``parallel=True``, ``prange`` over rows): each
-                          row writes only its own pixels or a private buffer.
+                          row writes only its own pixels or a private buffer. A large kernel can
+                          instead be a ``block(nogil=True)`` driver run on threads by
+                          :func:`gdlearn.kernels.threads.run_rows` (gpt's: a third less to compile).
 ========================  =======================================================================
 
 In a :func:`rows` loop, write ``for row in prange(h): y = np.int64(row)``: numba types the prange

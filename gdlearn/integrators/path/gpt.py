@@ -54,6 +54,7 @@ from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup, compile_by_tracing
 from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.threads import fetch_add, run_rows
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
@@ -79,25 +80,23 @@ MANIFOLD_POLICY = "halfvector+reconnection+manifold"
 CHAIN_CLASSES = ("specular", "caustics")
 
 
-@block
 def gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
     """Per-pass means per base pixel in ``out`` (9, H, W, 3): [0] L, the base radiance (pt's primal
     sample); [1 + k] D_k, the gradient sample of shift k (right, left, down, up), sum over techniques
     of w (C' - C), -C for a failed shift; [5 + k] S_k, the weighted offset contribution sum w C' (0 for
     failed or outside shifts). ``stats`` (H, N_STATS) shift counters per row, ``bad`` (H,) dropped
     non-finite samples (the whole sample is dropped). ``gpt_volume.gpt_volume_rows`` has the same
-    signature and contract."""
-    # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed, as pt)
-    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats, bad, None)     # None: no manifold code
+    signature and contract. The rows run on threads, each taking chunks of rows until the image is
+    done (``kernels.threads.run_rows``): no parallel kernel to compile, a third of gpt's cold compile."""
+    run_rows(lambda counter, step: _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, None, counter, step),
+             out.shape[1])     # None: no manifold code
 
 
-@block
-def gpt_manifold_rows(sa, seed, sample0, spp, cfg, out, stats, bad,
-                      mtab):
+def gpt_manifold_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
     """:func:`gpt_rows` with the manifold shape table ``mtab`` (:func:`gdlearn.integrators.path.gpt_surface.manifold.manifold_table`)
     for the policy ``halfvector+reconnection+manifold``."""
-    _gpt_rows(borrowed(sa), seed, sample0, spp, cfg, out, stats,
-              bad, mtab)
+    run_rows(lambda counter, step: _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab, counter, step),
+             out.shape[1])
 
 
 @block
@@ -131,32 +130,39 @@ def _replay_policy_rows(sa, seed, sample0, spp, cfg, out, stats, bad, volume):
             store_means(out, y, x, acc, inv)
 
 
-@rows
-def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab):
+@block(nogil=True)
+def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab, counter, step):
+    """One thread's share of the pass: chunks of ``step`` rows taken from ``counter`` until the image
+    is done (:func:`gdlearn.kernels.threads.run_rows` runs it on every thread at once)."""
+    # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed, as pt)
+    sa = borrowed(sa)
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        of = np.zeros((4, NF))
-        oi = np.zeros((4, NI), dtype=np.int64)
-        diff = np.zeros((8, 3))
-        acc = np.zeros((9, 3))
-        cf = np.zeros((MAX_CHAIN + 1, NCF))
-        ci = np.zeros((MAX_CHAIN + 1, NCI), dtype=np.int64)
-        st = stats[y]
-        for x in range(w):
-            key = y * w + x
-            acc[:] = 0.0
-            for s in range(sample0, sample0 + spp):
-                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                c = gpt_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff, st, stack,
-                               mtab, cf, ci)
-                if not finite_sample(c, diff):
-                    bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
-                    continue
-                add_sample(acc, c, diff)
-            store_means(out, y, x, acc, inv)
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    of = np.zeros((4, NF))
+    oi = np.zeros((4, NI), dtype=np.int64)
+    diff = np.zeros((8, 3))
+    acc = np.zeros((9, 3))
+    cf = np.zeros((MAX_CHAIN + 1, NCF))
+    ci = np.zeros((MAX_CHAIN + 1, NCI), dtype=np.int64)
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            st = stats[y]
+            for x in range(w):
+                key = y * w + x
+                acc[:] = 0.0
+                for s in range(sample0, sample0 + spp):
+                    fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+                    c = gpt_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff, st,
+                                   stack, mtab, cf, ci)
+                    if not finite_sample(c, diff):
+                        bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
+                        continue
+                    add_sample(acc, c, diff)
+                store_means(out, y, x, acc, inv)
 
 
 def _has_null_or_media(setup) -> bool:

@@ -28,7 +28,6 @@ weighted base term, so B_k(p) + S_opposite(q) is the pair's MIS estimate of I_p.
 import math
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
                                   lobe_class, sampled_lobe_class, vertex_class)
@@ -61,7 +60,8 @@ from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
-from gdlearn.kernels.jit import block, leaf, noalloc, rows
+from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.threads import fetch_add, run_rows
 from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM, VB_SURFACE, BaseVertex, NextVertex, PathRng, Pixel
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -351,41 +351,47 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
     return L
 
 
-@block
 def gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
     """``out`` (9, H, W, 3) per-pass means per base pixel: [0] L, [1 + k] D_k, [5 + k] S_k (shift k:
     right, left, down, up). ``stats`` (H, N_STATS) shift counters per row (``shifts.policy.record``),
-    ``bad`` (H,) samples dropped because something in them was not finite."""
+    ``bad`` (H,) samples dropped because something in them was not finite. Rows run on threads
+    (:func:`gdlearn.kernels.threads.run_rows`), not in a parallel kernel: a third less to compile."""
+    run_rows(lambda counter, step: _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad, counter, step),
+             out.shape[1])
+
+
+@block(nogil=True)
+def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad, counter, step):
+    """One thread's share of the pass: chunks of ``step`` rows taken from ``counter`` until the image
+    is done."""
     # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed)
-    _gpt_volume_rows(borrowed(sa), seed, sample0, spp, cfg, out,
-                     stats, bad)
-
-
-@rows
-def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad):
+    sa = borrowed(sa)
     h, w = out.shape[1], out.shape[2]
     inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        of = np.zeros((4, NFV))
-        oi = np.zeros((4, NIV), dtype=np.int64)
-        diff = np.zeros((4, 3))
-        summ = np.zeros((4, 3))
-        d8 = np.zeros((8, 3))
-        acc = np.zeros((9, 3))
-        st = stats[y]
-        for x in range(w):
-            key = y * w + x
-            acc[:] = 0.0
-            for s in range(sample0, sample0 + spp):
-                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi, diff,
-                                      summ, st, stack)
-                d8[:4] = diff
-                d8[4:] = summ
-                if not finite_sample(c, d8):
-                    bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
-                    continue
-                add_sample(acc, c, d8)
-            store_means(out, y, x, acc, inv)
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    of = np.zeros((4, NFV))
+    oi = np.zeros((4, NIV), dtype=np.int64)
+    diff = np.zeros((4, 3))
+    summ = np.zeros((4, 3))
+    d8 = np.zeros((8, 3))
+    acc = np.zeros((9, 3))
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            st = stats[y]
+            for x in range(w):
+                key = y * w + x
+                acc[:] = 0.0
+                for s in range(sample0, sample0 + spp):
+                    fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+                    c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi,
+                                          diff, summ, st, stack)
+                    d8[:4] = diff
+                    d8[4:] = summ
+                    if not finite_sample(c, d8):
+                        bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
+                        continue
+                    add_sample(acc, c, d8)
+                store_means(out, y, x, acc, inv)

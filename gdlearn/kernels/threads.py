@@ -1,0 +1,61 @@
+"""Rows on threads without a parallel kernel: :func:`run_rows` and its atomic row counter.
+
+numba's ``parallel=True`` turns a ``prange`` loop into a separate *gufunc* that it types and
+optimises on its own, with everything inlined into it, after the function around it -- one more
+pass of the optimiser over the whole kernel. For gpt's kernels that pass was about a third of a
+cold compile (benchmarks/README.md). A row driver that is an ordinary compiled function instead,
+compiled with ``nogil=True`` and called from a few Python threads at once, runs the same rows in
+parallel at the compile cost of a serial function.
+
+Each thread calls the driver once; the driver takes the next chunk of rows from a shared counter
+with an atomic fetch-and-add (:func:`fetch_add`) until the image is done, so rows are dealt out
+dynamically as ``prange`` with a chunk size does (rows differ in cost: the light, the boxes,
+escaping rays), and the threads cross into Python only to start and to finish.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+#: chunks per image: small enough that no thread idles long at the end of a pass, large enough
+#: that the counter is touched rarely (the value ``SceneSetup.parallel`` gives ``prange``)
+CHUNKS = 32
+
+
+@intrinsic
+def fetch_add(typingctx, counter, value):
+    """Atomically add ``value`` to ``counter[0]`` (a 1-D int64 array) and return the old value."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64 and counter.ndim == 1
+            and isinstance(value, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        arr = context.make_array(counter)(context, builder, value=args[0])
+        v = context.cast(builder, args[1], signature.args[1], types.int64)
+        return builder.atomic_rmw("add", arr.data, v, "seq_cst")
+
+    return types.int64(counter, value), codegen
+
+
+def run_rows(worker, rows: int, threads: int | None = None) -> None:
+    """Run ``worker(counter, step)`` on ``threads`` threads at once (default: numba's thread count,
+    which :meth:`gdlearn.integrators.setup.SceneSetup.parallel` sets) and wait for all of them.
+
+    ``worker`` is a compiled ``nogil`` row driver: it loops ``y0 = fetch_add(counter, step)`` and
+    renders rows ``y0 .. y0 + step - 1`` until ``y0 >= rows``. An exception in a thread is raised here."""
+    n = max(1, min(int(threads or numba.get_num_threads()), rows))
+    counter = np.zeros(1, dtype=np.int64)
+    step = max(1, rows // CHUNKS)
+    if n == 1:
+        worker(counter, step)
+        return
+    with ThreadPoolExecutor(max_workers=n) as ex:
+        for f in [ex.submit(worker, counter, step) for _ in range(n)]:
+            f.result()
+
+
+__all__ = ["CHUNKS", "fetch_add", "run_rows"]
