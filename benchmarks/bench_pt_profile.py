@@ -25,7 +25,6 @@ import numpy as np  # noqa: E402
 from numba import njit, prange  # noqa: E402
 
 from gdlearn.integrators import make  # noqa: E402
-from gdlearn.integrators.path.pt import _rows_path  # noqa: E402
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit  # noqa: E402
 from gdlearn.kernels.camera import camera_ray  # noqa: E402
 from gdlearn.kernels.arrays import borrowed  # noqa: E402
@@ -68,11 +67,6 @@ def main(argv=None):
         integ = make("pt", scene, seed=0, spp_per_pass=a.spp, threads=threads)
         integ.compile()
         cases.append((f"pt, {threads} thread(s)", "M samples/s", lambda integ=integ: integ.render_pass(0)))
-        if not integ.setup.media:   # the same kernel on the owned (reference-counted) arrays, for comparison
-            img, bad = np.zeros((a.res, a.res, 3)), np.zeros(a.res, dtype=np.int64)
-            f = (lambda integ=integ, img=img, bad=bad: _rows_path(
-                integ.setup.sa, 0, 0, a.spp, integ.setup.max_depth, integ.setup.rr_depth, integ.setup.mask, integ.setup.threshold, img, bad))
-            cases.append((f"pt, sa not borrowed, {threads} thread(s)", "M samples/s", _with_threads(threads, f)))
         sa, out = integ.setup.sa, np.zeros(a.res, dtype=np.int64)
         for b in (False, True):
             f = (lambda sb=(borrowed(sa) if b else sa): _camera_hits(sb, a.res, a.res, a.spp, out))

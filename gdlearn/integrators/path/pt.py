@@ -1,7 +1,8 @@
 """The primal path tracer ("pt"): Mitsuba 3's ``path`` / ``volpath`` as a progressive estimator.
 
 One pass renders ``spp_per_pass`` samples in every pixel. Rows are distributed over the threads
-with ``prange`` (dynamic chunks, so the costlier rows of a scene do not idle a core); every row
+in dynamic chunks (:func:`gdlearn.kernels.threads.run_rows`, so the costlier rows of a scene do not
+idle a core; no parallel kernel to compile); every row
 writes only its own pixels, and every random number is ``rand(seed, pixel key, sample index, dim)``
 -- so the image is the same for 1 and 2 threads and for any pass split. The threads share the scene
 as *borrowed* arrays (:func:`gdlearn.kernels.arrays.borrowed`): with the owned arrays every kernel call
@@ -18,7 +19,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.camera import camera_ray
@@ -30,97 +30,111 @@ from gdlearn.integrators.path.volume import radiance_volpath_inline
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.jit import block
+from gdlearn.kernels.threads import fetch_add, run_rows
 
-@block
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
     every pixel into ``out`` (H x W x 3); ``bad[y]`` counts the non-finite samples dropped in row y."""
-    # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed)
-    _rows_path(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad)
+    run_rows(lambda counter, step: _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out,
+                                              bad, counter, step), out.shape[0])
 
 
 # The surface and volume row loops below are twins on purpose: passing the radiance function as an
 # argument would merge them, but numba never caches a kernel that takes a dispatcher argument
 # (measured: every process recompiles it, ~40 s), and this loop is the hot, cached entry point.
-@rows
-def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+@block(nogil=True)
+def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad, counter, step):
+    """One thread's share of :func:`render_rows_path`: chunks of ``step`` rows from ``counter``."""
+    sa = borrowed(sa)      # no atomic reference counts shared by the threads (kernels.arrays.borrowed)
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        nbad = 0
-        for x in range(w):
-            key = y * w + x
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            for s in range(sample0, sample0 + spp):
-                o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_path_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
-                if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
-                    a0 += c[0]
-                    a1 += c[1]
-                    a2 += c[2]
-                else:
-                    nbad += 1
-            out[y, x, 0] = a0 * inv
-            out[y, x, 1] = a1 * inv
-            out[y, x, 2] = a2 * inv
-        bad[y] = nbad
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            nbad = 0
+            for x in range(w):
+                key = y * w + x
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for s in range(sample0, sample0 + spp):
+                    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                    c = radiance_path_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold,
+                                             stack)
+                    if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
+                        a0 += c[0]
+                        a1 += c[1]
+                        a2 += c[2]
+                    else:
+                        nbad += 1
+                out[y, x, 0] = a0 * inv
+                out[y, x, 1] = a1 * inv
+                out[y, x, 2] = a2 * inv
+            bad[y] = nbad
 
 
-@block
 def render_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """As :func:`render_rows_path`, traced in packets of paths (:mod:`gdlearn.integrators.path.packet`;
     the same image bit for bit, for the scenes it accepts)."""
-    # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed)
-    _rows_packet(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, out, bad)
+    run_rows(lambda counter, step: _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter,
+                                                step), out.shape[0])
 
 
-@rows
-def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad):
-    for row in prange(out.shape[0]):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        S, Q, buf = surface_packet.new_buffers()
-        bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
+@block(nogil=True)
+def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter, step):
+    sa = borrowed(sa)
+    h = out.shape[0]
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    S, Q, buf = surface_packet.new_buffers()
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
 
 
-@block
 def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
-    # borrowed arrays: no atomic reference counts shared by the threads (kernels.arrays.borrowed)
-    _rows_volpath(borrowed(sa), seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad)
+    run_rows(lambda counter, step: _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out,
+                                                 bad, counter, step), out.shape[0])
 
 
-@rows
-def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+@block(nogil=True)
+def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad, counter, step):
+    sa = borrowed(sa)
     h, w = out.shape[0], out.shape[1]
     inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        nbad = 0
-        for x in range(w):
-            key = y * w + x
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            for s in range(sample0, sample0 + spp):
-                o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                c = radiance_volpath_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
-                if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
-                    a0 += c[0]
-                    a1 += c[1]
-                    a2 += c[2]
-                else:
-                    nbad += 1
-            out[y, x, 0] = a0 * inv
-            out[y, x, 1] = a1 * inv
-            out[y, x, 2] = a2 * inv
-        bad[y] = nbad
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            nbad = 0
+            for x in range(w):
+                key = y * w + x
+                a0 = 0.0
+                a1 = 0.0
+                a2 = 0.0
+                for s in range(sample0, sample0 + spp):
+                    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                    c = radiance_volpath_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold,
+                                                stack)
+                    if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
+                        a0 += c[0]
+                        a1 += c[1]
+                        a2 += c[2]
+                    else:
+                        nbad += 1
+                out[y, x, 0] = a0 * inv
+                out[y, x, 1] = a1 * inv
+                out[y, x, 2] = a2 * inv
+            bad[y] = nbad
 
 
 class PathTracer(ProgressiveIntegrator):
