@@ -46,13 +46,13 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.kernels.jit import block, inlined, rows
+from gdlearn.kernels.jit import block, inlined
+from gdlearn.kernels.threads import fetch_add, run_rows
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
@@ -158,13 +158,13 @@ def _reversible(sa, lp, q, ys, yh, ystar, p, frame, p2, frame2, r, stack):
 _shift_photons = make_shift_photons(photon_base, _shift)
 
 
-@block
 def gpm_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     """Every pixel's two base gather points (samples sample0 + h, half h queries grids[h]) and their
     four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel;
-    ``mtab`` the manifold shape rows of the primitives (the manifold branch's chains)."""
-    _gpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), borrow(mtab), prm, seed,
-              sample0, radius, borrow_out(out))
+    ``mtab`` the manifold shape rows of the primitives (the manifold branch's chains). The rows run
+    on threads (``kernels.threads.run_rows``): no parallel kernel to compile."""
+    run_rows(lambda counter, step: _gpm_rows(sa, lp, grids[0], grids[1], mtab, prm, seed, sample0, radius, out,
+                                             counter, step), radius.shape[0])
 
 
 @block
@@ -173,11 +173,19 @@ def borrow_out(o):
     return GpmOut(borrow(o.phi), borrow(o.le), borrow(o.m), borrow(o.foot), borrow(o.count), borrow(o.bad))
 
 
-@rows
-def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
-    for row in prange(radius.shape[0]):
-        y = np.int64(row)           # one specialisation of _gpm_row (kernels/jit.py: prange's index type)
-        out.bad[y] = _gpm_row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
+@block(nogil=True)
+def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, step):
+    """One thread's share of :func:`gpm_rows`: chunks of ``step`` rows taken from ``counter``."""
+    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+    sb, lb, grids, mb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb)), borrow(mtab), \
+        borrow_out(out)
+    h = radius.shape[0]
+    while True:
+        y0 = fetch_add(counter, step)
+        if y0 >= h:
+            return
+        for y in range(y0, min(y0 + step, h)):
+            ob.bad[y] = _gpm_row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
 
 
 @block
