@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 
 from gdlearn.kernels.jit import block
-from gdlearn.kernels.threads import CHUNKS, fetch_add, run_rows
+from gdlearn.kernels.threads import CHUNKS, fetch_add, next_rows, run_rows
 
 
 @block(nogil=True)
 def _mark_rows(visits, counter, step):
     h = visits.shape[0]
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             visits[y] += 1
 
 

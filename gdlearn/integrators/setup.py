@@ -14,6 +14,7 @@ from contextlib import contextmanager
 
 import numba
 
+from gdlearn.kernels.threads import CHUNKS
 from gdlearn.scene.compile import compile_scene
 from gdlearn.scene.effects import plan as effects_plan
 
@@ -65,7 +66,7 @@ class SceneSetup:
         if self.threads is not None:
             numba.set_num_threads(int(self.threads))
         try:
-            with numba.parallel_chunksize(max(1, rows // 32)):
+            with numba.parallel_chunksize(max(1, rows // CHUNKS)):
                 yield
         finally:
             numba.set_num_threads(old)

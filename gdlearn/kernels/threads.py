@@ -8,7 +8,7 @@ compiled with ``nogil=True`` and called from a few Python threads at once, runs 
 parallel at the compile cost of a serial function.
 
 Each thread calls the driver once; the driver takes the next chunk of rows from a shared counter
-with an atomic fetch-and-add (:func:`fetch_add`) until the image is done, so rows are dealt out
+with an atomic fetch-and-add (:func:`next_rows`) until the image is done, so rows are dealt out
 dynamically as ``prange`` with a chunk size does (rows differ in cost: the light, the boxes,
 escaping rays), and the threads cross into Python only to start and to finish.
 """
@@ -20,6 +20,8 @@ import numba
 import numpy as np
 from numba import types
 from numba.extending import intrinsic
+
+from gdlearn.kernels.jit import inlined
 
 #: chunks per image: small enough that no thread idles long at the end of a pass, large enough
 #: that the counter is touched rarely (the value ``SceneSetup.parallel`` gives ``prange``)
@@ -41,6 +43,21 @@ def fetch_add(typingctx, counter, value):
     return types.int64(counter, value), codegen
 
 
+@inlined
+def next_rows(counter, step, rows):
+    """The next chunk ``(y0, y1)`` of at most ``step`` rows a driver renders, ``y0 == y1`` once the
+    image is done. A driver's loop::
+
+        while True:
+            y0, y1 = next_rows(counter, step, h)
+            if y0 == y1:
+                return
+            for y in range(y0, y1): ...
+    """
+    y0 = min(fetch_add(counter, step), rows)
+    return y0, min(y0 + step, rows)
+
+
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -58,8 +75,8 @@ def run_rows(worker, rows: int, threads: int | None = None) -> None:
     """Run ``worker(counter, step)`` on ``threads`` threads at once (default: numba's thread count,
     which :meth:`gdlearn.integrators.setup.SceneSetup.parallel` sets) and wait for all of them.
 
-    ``worker`` is a compiled ``nogil`` row driver: it loops ``y0 = fetch_add(counter, step)`` and
-    renders rows ``y0 .. y0 + step - 1`` until ``y0 >= rows``. The calling thread is one of the
+    ``worker`` is a compiled ``nogil`` row driver: it renders the chunks :func:`next_rows` hands out
+    until the image is done. The calling thread is one of the
     threads; the others come from a pool kept for the process. An exception in any of them is
     raised here, after all have stopped."""
     n = max(1, min(int(threads or numba.get_num_threads()), rows))
@@ -75,4 +92,4 @@ def run_rows(worker, rows: int, threads: int | None = None) -> None:
         f.result()
 
 
-__all__ = ["CHUNKS", "fetch_add", "run_rows"]
+__all__ = ["CHUNKS", "fetch_add", "next_rows", "run_rows"]

@@ -54,7 +54,7 @@ from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup, compile_by_tracing
 from gdlearn.kernels.jit import block, rows
-from gdlearn.kernels.threads import fetch_add, run_rows
+from gdlearn.kernels.threads import next_rows, run_rows
 
 #: policies whose unbiasedness tests pass (tests/test_gpt.py, test_gpt_manifold.py) *and* whose deliberately
 #: broken variants fail them (the manifold Jacobian's on scenes/caustic-closeup.xml)
@@ -146,10 +146,10 @@ def _gpt_rows(sa, seed, sample0, spp, cfg, out, stats, bad, mtab, counter, step)
     cf = np.zeros((MAX_CHAIN + 1, NCF))
     ci = np.zeros((MAX_CHAIN + 1, NCI), dtype=np.int64)
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             st = stats[y]
             for x in range(w):
                 key = y * w + x

@@ -31,7 +31,7 @@ from gdlearn.kernels.arrays import borrowed
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup
 from gdlearn.kernels.jit import block
-from gdlearn.kernels.threads import fetch_add, run_rows
+from gdlearn.kernels.threads import next_rows, run_rows
 
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
@@ -51,10 +51,10 @@ def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out
     inv = 1.0 / spp
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             nbad = 0
             for x in range(w):
                 key = y * w + x
@@ -91,10 +91,10 @@ def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter,
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     S, Q, buf = surface_packet.new_buffers()
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
 
 
@@ -111,10 +111,10 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
     inv = 1.0 / spp
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             nbad = 0
             for x in range(w):
                 key = y * w + x

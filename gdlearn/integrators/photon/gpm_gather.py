@@ -52,7 +52,7 @@ from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import offset_origin
 from gdlearn.kernels.jit import block, inlined
-from gdlearn.kernels.threads import fetch_add, run_rows
+from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
@@ -181,10 +181,10 @@ def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, st
         borrow_out(out)
     h = radius.shape[0]
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             ob.bad[y] = _gpm_row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
 
 

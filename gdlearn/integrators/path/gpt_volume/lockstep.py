@@ -61,7 +61,7 @@ from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
 from gdlearn.kernels.jit import block, leaf, noalloc
-from gdlearn.kernels.threads import fetch_add, run_rows
+from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM, VB_SURFACE, BaseVertex, NextVertex, PathRng, Pixel
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -376,10 +376,10 @@ def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad, counter, step
     d8 = np.zeros((8, 3))
     acc = np.zeros((9, 3))
     while True:
-        y0 = fetch_add(counter, step)
-        if y0 >= h:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
             return
-        for y in range(y0, min(y0 + step, h)):
+        for y in range(y0, y1):
             st = stats[y]
             for x in range(w):
                 key = y * w + x
