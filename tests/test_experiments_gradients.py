@@ -5,7 +5,8 @@ import pytest
 
 from gdlearn.experiments import Method
 from gdlearn.experiments.gradients import (finite_differences, gradient_errors, gradient_relmse,
-                                           gradient_relmse_maps, shift_summary, summarize)
+                                           gradient_relmse_maps, shift_summary, summarize,
+                                           summed_stats)
 from gdlearn.experiments.metrics import RELMSE_EPS
 from gdlearn.teaching.toy import ToyGradient, ToyPrimal, ToyScene
 
@@ -68,6 +69,13 @@ def test_shift_summary_hand_numbers():
     assert set(s) == {"replay", "reconnection", "fail"}         # only the counters the frame has
     assert s["reconnection"] == {"per_path": 0.5, "success": 0.8}
     assert np.isnan(s["replay"]["success"]) and s["fail"]["success"] == 0.0
+
+
+def test_summed_stats_adds_the_counters_of_records():
+    recs = [{"method": "a", "seed": 0, "n_paths": 10, "n_shift_fail_run": 1, "relmse": 0.5},
+            {"method": "a", "seed": 1, "n_paths": 30, "n_shift_fail_run": 2, "n_bad": 4}]
+    assert summed_stats(recs) == {"paths": 40, "shift_fail_run": 3, "bad": 4}
+    assert shift_summary(summed_stats(recs))["fail"]["per_path"] == pytest.approx(3 / 40)
 
 
 def test_summarize_mean_and_standard_error():

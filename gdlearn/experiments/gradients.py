@@ -91,6 +91,18 @@ def shift_summary(stats: dict) -> dict[str, dict[str, float]]:
     return out
 
 
+def summed_stats(records) -> dict[str, int]:
+    """The frames' counters of ``records`` (their ``n_`` columns, written by :func:`gradient_errors`
+    and :func:`~gdlearn.experiments.study.equal_time`), summed over the records, prefix removed: the
+    ``stats`` :func:`shift_summary` reads, for several runs at once."""
+    out = {}
+    for r in records:
+        for k, v in r.items():
+            if k.startswith("n_"):
+                out[k[2:]] = out.get(k[2:], 0) + v
+    return out
+
+
 def gradient_errors(methods, scenes, *, spp: int, seeds, references, spp_per_pass: int | None = None,
                     eps: float = RELMSE_EPS) -> list[dict]:
     """Render every method on every scene at ``spp`` samples per pixel for every seed and measure
