@@ -82,3 +82,50 @@ def test_reference_noise_floor_predicts_measured_error():
     # Both are means of 6e4 chi-square(1)-like terms: relative std sqrt(2/6e4) = 0.6 % each, so their
     # difference has std ~0.8 %; 4 % is 5 standard errors (the R-vs-T denominator bias is ~0.2 %).
     assert floor == pytest.approx(measured, rel=0.04)
+
+
+def test_bias_variance_splits_the_mean_relmse_exactly():
+    rng = np.random.default_rng(7)
+    ref = rng.uniform(0.05, 2.0, (16, 12, 3))
+    imgs = [ref * 1.1 + 0.05 * rng.standard_normal(ref.shape) for _ in range(5)]
+    bv = M.bias_variance(imgs, ref)
+    # the identity of the docstring: the mean of the renders' own relMSE, to round-off
+    assert bv["relmse"] == pytest.approx(np.mean([M.relmse(im, ref) for im in imgs]), rel=1e-12)
+    assert bv["renders"] == 5
+
+
+def test_bias_variance_recovers_a_known_bias_and_noise():
+    # X = R (1 + b) + sigma e: bias^2 and variance of the relMSE weighting are known in closed form.
+    # 40 renders of 64x64x3 pixels: the estimates' relative standard errors are ~1 % (variance) and
+    # ~2 % (bias^2), so 5 % tolerances are ~3 standard errors and a factor n mistake fails them
+    rng = np.random.default_rng(11)
+    ref = rng.uniform(0.05, 2.0, (64, 64, 3))
+    b, sigma = 0.05, 0.02
+    w = 1.0 / (ref * ref + M.RELMSE_EPS)
+    imgs = [ref * (1 + b) + sigma * rng.standard_normal(ref.shape) for _ in range(40)]
+    bv = M.bias_variance(imgs, ref)
+    assert bv["variance"] == pytest.approx(np.mean(sigma ** 2 * w), rel=0.05)
+    assert bv["bias2"] == pytest.approx(np.mean((b * ref) ** 2 * w), rel=0.05)
+
+
+def test_bias_variance_of_an_unbiased_estimator_is_zero_on_average():
+    # few renders (n = 3) each: without the -s^2/n correction the bias part would average
+    # variance / 3 = 1.3e-4 here instead of 0; over 300 trials its standard error is ~5e-6
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.2, 1.0, (8, 8, 3))
+    parts = [M.bias_variance([ref + 0.01 * rng.standard_normal(ref.shape) for _ in range(3)], ref)
+             for _ in range(300)]
+    bias2 = np.array([p["bias2"] for p in parts])
+    variance = np.mean([p["variance"] for p in parts])
+    assert abs(bias2.mean()) < 4 * bias2.std(ddof=1) / np.sqrt(len(bias2))
+    assert abs(bias2.mean()) < 0.1 * variance
+
+
+def test_bias_variance_refuses_one_render_and_nonfinite_pixels():
+    ref = np.ones((4, 4, 3))
+    with pytest.raises(ValueError, match="at least 2"):
+        M.bias_variance([ref], ref)
+    bad = ref.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        M.bias_variance([ref, bad], ref)

@@ -87,6 +87,34 @@ def relmse_floor(reference_variance, reference, eps: float = RELMSE_EPS) -> floa
     return float(np.mean(var / (ref * ref + eps)))
 
 
+def bias_variance(images, reference, eps: float = RELMSE_EPS) -> dict[str, float]:
+    """Split the mean per-seed relMSE of independent renders into a variance and a bias part.
+
+    ``images`` are n >= 2 renders of one scene by one estimator with different seeds. Per pixel and
+    channel, with m the mean of the n renders and s^2 their sample variance,
+    mean_k (X_k - R)^2 = (m - R)^2 + (n - 1)/n s^2 exactly; (m - R)^2 - s^2/n estimates the squared
+    bias (its expectation is (E X - R)^2) and s^2 the variance of one render. Weighted as relMSE
+    weighs them and averaged, ``relmse = bias2 + variance`` holds exactly, where ``relmse`` is the
+    mean of the renders' own relMSE. ``bias2`` includes the reference's own noise (the floor,
+    :func:`relmse_floor`) and may come out slightly negative when the bias is below what n renders
+    resolve. A kernel estimator's radius trades one against the other (the photon chapters).
+    """
+    stack = np.asarray([_check_pair(im, reference)[0] for im in images], dtype=np.float64)
+    if stack.shape[0] < 2:
+        raise ValueError(f"bias_variance needs at least 2 independent renders, got {stack.shape[0]}; "
+                         "render the same scene with more seeds")
+    if not np.all(np.isfinite(stack)):
+        raise ValueError("a render holds NaN or Inf pixels: its error is undefined; find the bad samples first")
+    ref = np.asarray(reference, dtype=np.float64)
+    w = 1.0 / (ref * ref + eps)
+    n = stack.shape[0]
+    mean = stack.mean(axis=0)
+    s2 = stack.var(axis=0, ddof=1)
+    variance = float(np.mean(s2 * w))
+    bias2 = float(np.mean((mean - ref) ** 2 * w)) - variance / n
+    return {"relmse": bias2 + variance, "bias2": bias2, "variance": variance, "renders": n}
+
+
 def loglog_slope(seconds, errors) -> tuple[float, float]:
     """Least-squares fit log(error) = slope * log(seconds) + intercept; returns (slope, intercept).
 
