@@ -16,6 +16,15 @@ the reference's noise floor subtracted from both errors.
 
     .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3
 
+``--sweep SCALES``: the first kernel radius, ``radius_scale`` x the pixel footprint, for each scale
+and each method of ``--methods`` (e.g. sppm,gpm+l1) at equal time (``--equal-time``, default 20 s)
+over ``--seeds`` seeds: the final relMSE split by ``experiments.metrics.bias_variance`` into the
+squared bias of the kernel's blur (the reference's floor included) and the variance of one run, and
+the passes each run completed. This chose gpm's default ``radius_scale`` (gpm.RADIUS_SCALE).
+
+    flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gpm.py --sweep 0.25,0.35,0.5,0.7,1,1.4 \
+        --methods sppm,gpm+l1 --res 128 --seeds 3 --scenes scenes/cornell-box.xml
+
 ``--kernel``: the camera pass alone, the fast kernel (gpm_gather.gpm_rows) against the one it replaced
 (tests/_gpm_reference.py, kept for tests/test_gpm_fast.py) on the same photons and radii (pass 1 after
 pass 0's radius reduction), interleaved (old, new, old, ...) in one process, ``--repeats`` times; prints
@@ -127,6 +136,36 @@ def equal_time_study(a) -> int:
     return 0
 
 
+def radius_sweep(a) -> int:
+    """Bias and variance against the first kernel radius (module docstring, ``--sweep``)."""
+    from gdlearn.experiments import SceneFile, bias_variance, equal_time
+    from gdlearn.experiments.references import mitsuba_reference
+    from gdlearn.experiments.study import Method
+
+    seconds = a.equal_time or 20.0
+    scales = [float(x) for x in a.sweep.split(",")]
+    names = a.methods.split(",")
+    print(f"radius sweep: {seconds:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a pass; "
+          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    for path in a.scenes.split(","):
+        sf = SceneFile(path, (("res", a.res),))
+        ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
+        print(f"\n{sf.name}: reference Mitsuba {ref.spp} spp, relMSE floor {ref.floor:.2e}", flush=True)
+        for name in names:
+            est, _, solver = name.partition("+")
+            for scale in scales:
+                opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("radius_scale", scale))
+                m = Method(f"{name}@{scale:g}", est, solver or None, opts)
+                st = equal_time([m], [sf], seconds=seconds, seeds=a.seeds, references=ref, executor="serial", count=2)
+                imgs = [st.images[(m.label, sf.name, k)] for k in range(a.seeds)]
+                bv = bias_variance(imgs, ref.image)
+                passes = [r["passes"] for r in st.select(True, method=m.label)]
+                print(f"  {name:7s} radius_scale {scale:5.2f}: relMSE {bv['relmse']:.3e} = bias^2 {bv['bias2']:.3e} "
+                      f"+ variance {bv['variance']:.3e}; passes {', '.join(map(str, passes))}", flush=True)
+        print(f"  load average {os.getloadavg()[0]:.2f}")
+    return 0
+
+
 def fig4_study(a) -> int:
     """Primal vs reconstructions on the specular-parent subset (module docstring)."""
     import numpy as np
@@ -192,7 +231,10 @@ def main(argv=None) -> int:
     ap.add_argument("--passes", type=int, default=32, help="of --fig4, per seed")
     ap.add_argument("--ref-passes", type=int, default=400, help="of --fig4's sppm reference")
     ap.add_argument("--radius-scale", type=float, default=1.0, help="of --fig4: x the mean pixel footprint")
+    ap.add_argument("--sweep", default=None, metavar="SCALES", help="first radii in pixel footprints (module docstring)")
     a = ap.parse_args(argv)
+    if a.sweep:
+        return radius_sweep(a)
     if a.fig4:
         return fig4_study(a)
     if a.kernel:

@@ -234,3 +234,16 @@ def _ratio_one_way(sa, lp, q, v, ys, nv, ystar, parent_factor, photon_geometry_r
         return status, fr, 0.0
     geo = photon_geometry_ratio(tuple(yq), tuple(ys), tuple(nv), tuple(ystar), tuple(nv))
     return status, tuple(f * geo for f in fr), pr * geo
+
+
+def test_first_radius_is_a_fraction_of_sppms_footprint(cornell):
+    """gpm starts from RADIUS_SCALE pixel footprints, SPPM from one (gpm's module docstring: the
+    gradients afford a smaller kernel); an explicit radius_scale or radius still wins."""
+    from gdlearn.integrators.photon.gpm import RADIUS_SCALE
+
+    foot = make("sppm", cornell, photons_per_pass=100).initial_radius2()
+    assert np.allclose(make("gpm", cornell, photons_per_pass=100).initial_radius2(), RADIUS_SCALE ** 2 * foot,
+                       rtol=1e-12)
+    assert np.allclose(make("gpm", cornell, photons_per_pass=100, radius_scale=1.0).initial_radius2(), foot,
+                       rtol=1e-12)
+    assert np.all(make("gpm", cornell, photons_per_pass=100, radius=0.05).initial_radius2() == 0.05 ** 2)

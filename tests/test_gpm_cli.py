@@ -54,3 +54,14 @@ def test_reconstruction_leaves_the_emission_out():
     want = poisson_l2(f.primal - e, f.gx - f.images["emission_gx"], f.gy - f.images["emission_gy"])
     want = getattr(want, "image", want)
     assert np.allclose(final_image(f, "l2"), np.asarray(want) + e)
+
+
+def test_radius_scale_sets_the_first_radius_in_footprints(tmp_path):
+    # alpha = 1 keeps the first radius; the CLI's --radius-scale must reach the integrator, whose
+    # radius is then that multiple of the footprint (a dropped option would give gpm's default 0.35)
+    r = _cli("render", CORNELL, "--integrator", "gpm", "--photons", "2000", "--alpha", "1", "--radius-scale", "0.5",
+             "--spp", "2", "--set", "res=8", "--out", str(tmp_path / "a.npy"), "--buffers", str(tmp_path / "b"),
+             "--no-progress")
+    assert r.returncode == 0, r.stderr
+    footprint = np.sqrt(make("gpm", load(CORNELL, res=8), radius_scale=1.0).initial_radius2())
+    assert np.allclose(np.load(tmp_path / "b" / "radius.npy"), 0.5 * footprint, rtol=1e-12)

@@ -26,7 +26,8 @@ VOLUME_SHIFT_CHOICES = ("mixed", "simple")
 PHOTON_INTEGRATORS = ("sppm", "ppm", "gpm", "vpm", "bre", "gvpm", "gbre")
 #: option -> (keyword, the integrators it applies to)
 PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alpha": ("alpha", PHOTON_INTEGRATORS),
-                  "--radius": ("radius", PHOTON_INTEGRATORS), "--direct": ("direct", ("sppm", "ppm")),
+                  "--radius": ("radius", PHOTON_INTEGRATORS), "--radius-scale": ("radius_scale", PHOTON_INTEGRATORS),
+                  "--direct": ("direct", ("sppm", "ppm")),
                   "--volume-radius": ("volume_radius", ("vpm", "bre", "gvpm", "gbre")),
                   "--neighbors": ("neighbors", ("vpm", "bre", "gvpm", "gbre")),
                   "--transport": ("transport", ("vpm", "bre", "gvpm", "gbre")),
@@ -62,9 +63,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--photons", type=int, default=None, metavar="N",
                    help="sppm/ppm/vpm/bre/gvpm/gbre: light paths emitted per pass (default 100000)")
     p.add_argument("--alpha", type=float, default=None,
-                   help="sppm/ppm/vpm/bre/gvpm/gbre: radius reduction alpha (default 0.7)")
+                   help="photon integrators: radius reduction alpha (default 0.7; gpm 0.9, Hua et al. 2017's)")
     p.add_argument("--radius", type=float, default=None, metavar="R",
-                   help="sppm/ppm/vpm/bre/gvpm/gbre: initial surface radius in scene units (default: the pixel footprint)")
+                   help="photon integrators: initial surface radius in scene units, the same for every pixel "
+                        "(default: --radius-scale x each pixel's footprint)")
+    p.add_argument("--radius-scale", type=float, default=None, metavar="S",
+                   help="photon integrators: initial surface radius in pixel footprints (default 1; gpm 0.35: "
+                        "the gradients afford a smaller kernel, see gdlearn.integrators.photon.gpm)")
     p.add_argument("--direct", choices=("photons", "nee"), default=None,
                    help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
     p.add_argument("--volume-radius", type=float, default=None, metavar="R",

@@ -15,6 +15,18 @@ paths j < n and j >= n, each gathered by its own camera sample) share R and N, s
 estimates the variance the weighted reconstructions need (the online variance of a progressive
 estimate would mix passes of different radii).
 
+The kernel's first radius is ``radius_scale`` = ``RADIUS_SCALE`` (0.35) times the pixel footprint,
+not the footprint itself as in SPPM and Hua et al. 2017 (Sec. 5, "initialized using ray
+differentials, to approximate the projected pixel size"). A kernel estimator's error is the blur of
+its radius (a bias) plus its noise; the gradients hold the noise down, so at the footprint
+``gpm``'s error is almost all blur, and a smaller kernel trades a little more noise for
+almost all of the blur (Gruson et al. 2018, Sec. 6.3 and Fig. 11: the gradient domain "could be just safe
+to set a small kernel size"). Measured with :func:`gdlearn.experiments.metrics.bias_variance`
+(``benchmarks/bench_gpm.py --sweep``, 128x128, 20 s, 3 seeds; benchmarks/README.md): on the Cornell
+box gpm+L1's relMSE is 1.93e-3 at the footprint, of it 1.69e-3 squared bias, and 5.3e-4 at 0.35
+(0.25: 5.7e-4, 0.5: 6.4e-4); SPPM's is lowest at the footprint (1.94e-3; 2.7e-3 at 0.7, 2.1e-3 at
+1.4, 8.7e-3 at 0.35), so SPPM keeps it.
+
 The kernel radius of an offset is the base gather point's (Sec. 2.2); with per-pixel radii the
 gradient between p and q then mixes estimates at r_p and r_q, which the radius reduction makes
 consistent. At one fixed radius for every pixel (``radius=r, alpha=1``) the gradients are unbiased
@@ -45,17 +57,22 @@ from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, SurfacePhotonMappe
 from gdlearn.photons import grid as hashgrid
 
 
+#: the first kernel radius in pixel footprints (module docstring: the gradients afford a smaller kernel)
+RADIUS_SCALE = 0.35
+
+
 class GPM(SurfacePhotonMapper):
     """``make("gpm", scene, seed=0, photons_per_pass=100000, alpha=0.9, radius=None,
-    radius_scale=1.0, effects=None, max_depth=None, threads=None)`` (module docstring)."""
+    radius_scale=0.35, effects=None, max_depth=None, threads=None)`` (module docstring)."""
 
     name = "gpm"
 
-    def __init__(self, scene, *, alpha: float = 0.9, direct: str = "photons", **options):
+    def __init__(self, scene, *, alpha: float = 0.9, radius_scale: float = RADIUS_SCALE, direct: str = "photons",
+                 **options):
         if direct != "photons":
             raise ValueError("gpm estimates the direct light with photons (a gradient of the emitter sample at the "
                              "gather point would need a shift of its own); fix: drop direct=/--direct")
-        super().__init__(scene, alpha=alpha, direct="photons", **options)
+        super().__init__(scene, alpha=alpha, radius_scale=radius_scale, direct="photons", **options)
         self.mtab = manifold_table(scene, self.setup.sa)     # analytic specular shapes: the manifold branch
 
     def _gpm(self, light_paths, grids, sample0, radius):
