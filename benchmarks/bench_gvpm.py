@@ -29,6 +29,18 @@ and stops: keep each locked run under a few minutes by rendering the references,
 
     flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py --equal-time 20 --res 128 \
         --seeds 3 --scenes scenes/spot-medium.xml
+
+``--sweep SCALES``: the first volume radius, ``volume_radius_scale`` x the default (the median
+distance to the 32nd volume photon), for each scale and each of ``--methods`` at equal time
+(``--equal-time``, default 20 s), ``--seeds`` seeds: the final relMSE split by
+``experiments.metrics.bias_variance`` into the kernel's squared bias (the reference's floor and
+blur included) and one run's variance, as ``bench_gpm.py --sweep`` does for surfaces. The vpm
+reference carries its own kernel's blur: at the default radius a sharper estimate reads as biased
+against it (benchmarks/README.md), so a sweep takes a reference of a smaller radius
+(``--ref-radius-scale``) and more passes.
+
+    flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py --sweep 0.35,0.6,1 --methods vpm,gvpm+l1 \
+        --res 128 --photons 50000 --seeds 3 --scenes scenes/spot-medium.xml --ref-radius-scale 0.25 --ref-passes 256
 """
 from __future__ import annotations
 
@@ -124,7 +136,9 @@ REF_SEED = 1_000_003
 
 def _ref_key(path, a) -> str:
     from gdlearn.experiments.references import source_digest
-    h = hashlib.sha256(f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}".encode())
+    # the reference's radius enters the key only when it is not the default, so old caches stay valid
+    scale = "" if a.ref_radius_scale == 1.0 else f" {a.ref_radius_scale!r}"
+    h = hashlib.sha256(f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}{scale}".encode())
     h.update(open(path, "rb").read())
     h.update(source_digest(REF_SOURCES).encode())
     return h.hexdigest()[:20]
@@ -143,7 +157,7 @@ def vpm_reference(path, a):
         return load_reference(file), 0.0
     t0 = time.perf_counter()
     integ = make("vpm", load(path, res=a.res), seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads,
-                 transport="media")
+                 transport="media", volume_radius_scale=a.ref_radius_scale)
     frame = render(integ, spp=2 * a.ref_passes)
     if not np.isfinite(frame.primal).all():
         raise RuntimeError(f"{path}: the vpm reference has non-finite pixels")
@@ -153,24 +167,60 @@ def vpm_reference(path, a):
     return ref, time.perf_counter() - t0
 
 
-def equal_time_study(a) -> int:
-    """vpm vs gvpm+l1, gvpm+l2 and bre-3d at equal time, or any ``--methods`` against the first
-    (module docstring)."""
-    import numpy as np
-
-    from gdlearn.experiments import SceneFile, equal_time
+def methods(a, extra=()) -> dict:
+    """The methods ``--methods`` may name, every one with ``--transport media`` and ``extra`` options."""
     from gdlearn.experiments.study import Method
 
-    opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("transport", "media"))
+    opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("transport", "media")) + tuple(extra)
     k3, k2 = (("kernel", "3d"),), (("kernel", "2d"),)
     every = {"vpm": Method("vpm", "vpm", None, opts), "gvpm+l1": Method("gvpm+l1", "gvpm", "l1", opts),
              "gvpm+l2": Method("gvpm+l2", "gvpm", "l2", opts),
              "bre-3d": Method("bre-3d", "bre", None, opts + k3), "bre-2d": Method("bre-2d", "bre", None, opts + k2),
              "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
              "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
-    names = a.methods.split(",")
-    if any(n not in every for n in names):
+    if any(n not in every for n in a.methods.split(",")):
         raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)}; the first is the ratios' base")
+    return every
+
+
+def radius_sweep(a) -> int:
+    """Bias and variance against the first volume radius (module docstring, ``--sweep``)."""
+    from dataclasses import replace
+
+    from gdlearn.experiments import SceneFile, bias_variance, equal_time
+
+    seconds = a.equal_time or 20.0
+    print(f"volume radius sweep: {seconds:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths "
+          f"a pass, transport media; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+    for path in a.scenes.split(","):
+        ref, took = vpm_reference(path, a)
+        print(f"\n{os.path.basename(path)}: reference vpm {ref.spp // 2} passes x {a.ref_photons} light paths at "
+              f"{a.ref_radius_scale:g} x the default volume radius ({'cached' if took == 0 else f'{took:.0f} s'}), "
+              f"relMSE floor {ref.floor:.2e}", flush=True)
+        sf = SceneFile(path, (("res", a.res),))
+        for scale in (float(x) for x in a.sweep.split(",")):
+            every = methods(a, (("volume_radius_scale", scale),))
+            for name in a.methods.split(","):
+                m = replace(every[name], label=f"{name}@{scale:g}")
+                st = equal_time([m], [sf], seconds=seconds, seeds=a.seeds, references=ref, executor="serial", count=2)
+                bv = bias_variance([st.images[(m.label, sf.name, k)] for k in range(a.seeds)], ref.image)
+                passes = [r["passes"] for r in st.select(True, method=m.label)]
+                print(f"  {name:10s} volume_radius_scale {scale:5.2f}: relMSE {bv['relmse']:.3e} = bias^2 "
+                      f"{bv['bias2']:.3e} + variance {bv['variance']:.3e}; passes {', '.join(map(str, passes))}",
+                      flush=True)
+        print(f"  load average {os.getloadavg()[0]:.2f}", flush=True)
+    return 0
+
+
+def equal_time_study(a) -> int:
+    """vpm vs gvpm+l1, gvpm+l2 and bre-3d at equal time, or any ``--methods`` against the first
+    (module docstring)."""
+    import numpy as np
+
+    from gdlearn.experiments import SceneFile, equal_time
+
+    every = methods(a)
+    names = a.methods.split(",")
     base_name = names[0]
     print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
           f"pass, {a.threads} threads, transport media; load average {os.getloadavg()[0]:.2f} on "
@@ -226,7 +276,13 @@ def main(argv=None) -> int:
     p.add_argument("--ref-passes", type=int, default=64, help="passes of the vpm reference")
     p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
     p.add_argument("--refs-only", action="store_true")
+    p.add_argument("--ref-radius-scale", type=float, default=1.0,
+                   help="the reference's first volume radius, x the default (smaller: less of its own blur)")
+    p.add_argument("--sweep", default=None, metavar="SCALES",
+                   help="first volume radii, x the default (module docstring)")
     a = p.parse_args(argv)
+    if a.sweep:
+        return radius_sweep(a)
     if a.refs_only and a.equal_time is None:
         p.error("--refs-only renders the references of an equal-time study: give --equal-time S too")
     if a.equal_time is not None:
