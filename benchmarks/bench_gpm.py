@@ -100,11 +100,21 @@ def kernel_times(path, a) -> None:
           f"average {load0:.2f} -> {os.getloadavg()[0]:.2f}", flush=True)
 
 
+def mitsuba_scene(path, a):
+    """(SceneFile at --res, Mitsuba 3's image of it: --ref-spp spp over 8 seeds, llvm_ad_rgb, cached)."""
+    from gdlearn.experiments import SceneFile
+    from gdlearn.experiments.references import mitsuba_reference
+
+    sf = SceneFile(path, (("res", a.res),))
+    ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
+    print(f"\n{sf.name}: reference Mitsuba {ref.spp} spp, relMSE floor {ref.floor:.2e}", flush=True)
+    return sf, ref
+
+
 def equal_time_study(a) -> int:
     import numpy as np
 
-    from gdlearn.experiments import SceneFile, equal_time
-    from gdlearn.experiments.references import mitsuba_reference
+    from gdlearn.experiments import equal_time
     from gdlearn.experiments.study import Method
 
     opts = (("photons_per_pass", a.photons), ("threads", a.threads))
@@ -115,9 +125,7 @@ def equal_time_study(a) -> int:
     print(f"equal time {a.equal_time:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a "
           f"pass; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     for path in a.scenes.split(","):
-        sf = SceneFile(path, (("res", a.res),))
-        ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
-        print(f"\n{sf.name}: reference Mitsuba {ref.spp} spp, relMSE floor {ref.floor:.2e}", flush=True)
+        sf, ref = mitsuba_scene(path, a)
         err = {m: [] for m in names}
         for seed in range(a.seeds):
             st = equal_time(methods, [sf], seconds=a.equal_time, seeds=[seed], references=ref, executor="serial",
@@ -138,8 +146,7 @@ def equal_time_study(a) -> int:
 
 def radius_sweep(a) -> int:
     """Bias and variance against the first kernel radius (module docstring, ``--sweep``)."""
-    from gdlearn.experiments import SceneFile, bias_variance, equal_time
-    from gdlearn.experiments.references import mitsuba_reference
+    from gdlearn.experiments import bias_variance, equal_time
     from gdlearn.experiments.study import Method
 
     seconds = a.equal_time or 20.0
@@ -148,9 +155,7 @@ def radius_sweep(a) -> int:
     print(f"radius sweep: {seconds:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths a pass; "
           f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     for path in a.scenes.split(","):
-        sf = SceneFile(path, (("res", a.res),))
-        ref = mitsuba_reference(sf, spp=a.ref_spp, seeds=range(101, 109), variant="llvm_ad_rgb")
-        print(f"\n{sf.name}: reference Mitsuba {ref.spp} spp, relMSE floor {ref.floor:.2e}", flush=True)
+        sf, ref = mitsuba_scene(path, a)
         for name in names:
             est, _, solver = name.partition("+")
             for scale in scales:
