@@ -162,8 +162,7 @@ def radius_sweep(a) -> int:
                 opts = (("photons_per_pass", a.photons), ("threads", a.threads), ("radius_scale", scale))
                 m = Method(f"{name}@{scale:g}", est, solver or None, opts)
                 st = equal_time([m], [sf], seconds=seconds, seeds=a.seeds, references=ref, executor="serial", count=2)
-                imgs = [st.images[(m.label, sf.name, k)] for k in range(a.seeds)]
-                bv = bias_variance(imgs, ref.image)
+                bv = bias_variance(st.seed_images(m.label, sf.name), ref.image)
                 passes = [r["passes"] for r in st.select(True, method=m.label)]
                 print(f"  {name:7s} radius_scale {scale:5.2f}: relMSE {bv['relmse']:.3e} = bias^2 {bv['bias2']:.3e} "
                       f"+ variance {bv['variance']:.3e}; passes {', '.join(map(str, passes))}", flush=True)

@@ -203,7 +203,7 @@ def radius_sweep(a) -> int:
             for name in a.methods.split(","):
                 m = replace(every[name], label=f"{name}@{scale:g}")
                 st = equal_time([m], [sf], seconds=seconds, seeds=a.seeds, references=ref, executor="serial", count=2)
-                bv = bias_variance([st.images[(m.label, sf.name, k)] for k in range(a.seeds)], ref.image)
+                bv = bias_variance(st.seed_images(m.label, sf.name), ref.image)
                 passes = [r["passes"] for r in st.select(True, method=m.label)]
                 print(f"  {name:10s} volume_radius_scale {scale:5.2f}: relMSE {bv['relmse']:.3e} = bias^2 "
                       f"{bv['bias2']:.3e} + variance {bv['variance']:.3e}; passes {', '.join(map(str, passes))}",

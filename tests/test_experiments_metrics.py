@@ -129,3 +129,22 @@ def test_bias_variance_refuses_one_render_and_nonfinite_pixels():
     bad[0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN or Inf"):
         M.bias_variance([ref, bad], ref)
+
+
+def test_bias_variance_less_the_reference_noise_and_on_a_mask():
+    # a noisy reference's own variance adds the floor to bias2 once; given, it is subtracted exactly
+    # (relmse_floor's sum); a mask averages over its pixels only (here: the rows with a bias)
+    rng = np.random.default_rng(5)
+    ref = rng.uniform(0.2, 1.0, (10, 6, 3))
+    ref_var = rng.uniform(0.0, 1e-3, ref.shape)
+    imgs = [ref + 0.02 * rng.standard_normal(ref.shape) for _ in range(4)]
+    imgs = [im + np.where(np.arange(10)[:, None, None] < 5, 0.05, 0.0) for im in imgs]
+    plain = M.bias_variance(imgs, ref)
+    less = M.bias_variance(imgs, ref, reference_variance=ref_var)
+    assert less["variance"] == plain["variance"]
+    assert plain["bias2"] - less["bias2"] == pytest.approx(M.relmse_floor(ref_var, ref), rel=1e-9)
+    top = np.zeros((10, 6), bool)
+    top[:5] = True
+    on = M.bias_variance(imgs, ref, mask=top)
+    assert on["relmse"] == pytest.approx(np.mean([M.relmse_map(im, ref)[top].mean() for im in imgs]), rel=1e-12)
+    assert on["bias2"] > 1.8 * plain["bias2"]       # the biased half only: about twice the whole's

@@ -167,3 +167,11 @@ def test_scene_file_with_the_path_tracer():
     assert a.records[-1]["t_trace"] > 0 and a.records[-1]["compile_seconds"] >= 0
     with pytest.raises(SystemExit, match="NAME=VALUE"):
         _defines(["res"])
+
+
+def test_seed_images_are_one_method_and_scene_in_seed_order():
+    img = {(m, s, k): np.full((2, 2, 3), 10.0 * k + (m == "b") + 100 * (s == "y"))
+           for m in ("a", "b") for s in ("x", "y") for k in (2, 0, 1)}
+    st = S.Study([], img)
+    assert [float(i[0, 0, 0]) for i in st.seed_images("b", "x")] == [1.0, 11.0, 21.0]
+    assert st.seed_images("c", "x") == []

@@ -87,17 +87,21 @@ def relmse_floor(reference_variance, reference, eps: float = RELMSE_EPS) -> floa
     return float(np.mean(var / (ref * ref + eps)))
 
 
-def bias_variance(images, reference, eps: float = RELMSE_EPS) -> dict[str, float]:
+def bias_variance(images, reference, eps: float = RELMSE_EPS, reference_variance=None, mask=None) -> dict[str, float]:
     """Split the mean per-seed relMSE of independent renders into a variance and a bias part.
 
     ``images`` are n >= 2 renders of one scene by one estimator with different seeds. Per pixel and
     channel, with m the mean of the n renders and s^2 their sample variance,
     mean_k (X_k - R)^2 = (m - R)^2 + (n - 1)/n s^2 exactly; (m - R)^2 - s^2/n estimates the squared
     bias (its expectation is (E X - R)^2) and s^2 the variance of one render. Weighted as relMSE
-    weighs them and averaged, ``relmse = bias2 + variance`` holds exactly, where ``relmse`` is the
-    mean of the renders' own relMSE. ``bias2`` includes the reference's own noise (the floor,
-    :func:`relmse_floor`) and may come out slightly negative when the bias is below what n renders
-    resolve. A kernel estimator's radius trades one against the other (the photon chapters).
+    weighs them and averaged (over ``mask``'s pixels, a boolean H x W array, if given),
+    ``relmse = bias2 + variance`` holds exactly, where ``relmse`` is the mean of the renders' own
+    relMSE. ``bias2`` includes the reference's own noise (the floor, :func:`relmse_floor`) unless
+    its per-pixel ``reference_variance`` is given, which is then subtracted (E (m - R)^2 holds it
+    once more for an independent noisy R), and ``relmse`` less it. ``bias2`` may come out slightly
+    negative when the bias is below what n renders resolve: it is not clipped per pixel, which would
+    leave a positive floor of pure noise. A kernel estimator's radius trades one part against the
+    other (the photon chapters).
     """
     stack = np.asarray([_check_pair(im, reference)[0] for im in images], dtype=np.float64)
     if stack.shape[0] < 2:
@@ -108,10 +112,13 @@ def bias_variance(images, reference, eps: float = RELMSE_EPS) -> dict[str, float
     ref = np.asarray(reference, dtype=np.float64)
     w = 1.0 / (ref * ref + eps)
     n = stack.shape[0]
-    mean = stack.mean(axis=0)
     s2 = stack.var(axis=0, ddof=1)
-    variance = float(np.mean(s2 * w))
-    bias2 = float(np.mean((mean - ref) ** 2 * w)) - variance / n
+    sq = (stack.mean(axis=0) - ref) ** 2
+    if reference_variance is not None:
+        sq = sq - _check_pair(reference_variance, reference)[0]
+    pick = (lambda a: a) if mask is None else (lambda a: a[np.asarray(mask, dtype=bool)])
+    variance = float(np.mean(pick(s2 * w)))
+    bias2 = float(np.mean(pick(sq * w))) - variance / n
     return {"relmse": bias2 + variance, "bias2": bias2, "variance": variance, "renders": n}
 
 

@@ -176,6 +176,12 @@ class Study:
     def methods(self) -> list[str]:
         return list(dict.fromkeys(r["method"] for r in self.records))
 
+    def seed_images(self, method: str, scene: str) -> list[np.ndarray]:
+        """The final images of ``method`` on ``scene``, one per seed in seed order (what
+        :func:`gdlearn.experiments.metrics.bias_variance` splits)."""
+        return [img for (m, s, _), img in sorted(self.images.items(), key=lambda kv: kv[0][2])
+                if m == method and s == scene]
+
     def scenes(self) -> list[str]:
         return list(dict.fromkeys(r["scene"] for r in self.records))
 
