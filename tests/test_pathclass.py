@@ -143,3 +143,52 @@ def test_usable_inside_njit_with_int32_vertex_classes():
     assert bound == -1
     got, bound = trace(vcs, 0b11)          # "direct": the prefix dies after its first vertex
     assert int(got[0]) == 1 and int(got[1]) == -1 and bound == 1
+
+
+# The camera's end (pathclass.MEDIA_TRANSPORT, SURFACE_TRANSPORT): paths whose first non-specular
+# vertex from the camera is a medium event, and the others. The reference reads the string from the
+# camera end, independently of the kernel's incremental state.
+def reference_eye_medium(path: str) -> bool:
+    rest = path.lstrip("S")
+    return rest[:1] == "M"
+
+
+def reference_wanted(path: str, mask: int) -> bool:
+    if not (mask >> reference_class(path)) & 1:
+        return False
+    if mask & pc.MEDIA_TRANSPORT:
+        return reference_eye_medium(path)
+    if mask & pc.SURFACE_TRANSPORT:
+        return not reference_eye_medium(path)
+    return True
+
+
+def test_eye_kind_is_the_first_non_specular_camera_vertex():
+    kinds = {"": pc.EYE_NONE, "D": pc.EYE_SURFACE, "G": pc.EYE_SURFACE, "M": pc.EYE_MEDIUM}
+    bad = [p for p in strings(6) if pc.pc_eye(state_of(p)) != kinds[p.lstrip("S")[:1]]]
+    assert not bad, bad[:10]
+
+
+@pytest.mark.parametrize("end", ["MEDIA_TRANSPORT", "SURFACE_TRANSPORT"])
+def test_wanted_and_reachable_with_a_camera_end(end):
+    """pc_wanted is the reference's, and pc_reachable is exact: true iff some extension by up to
+    EXT vertices is wanted, for every prefix up to 6 vertices and class masks with the end bit."""
+    bit = getattr(pc, end)
+    rng = np.random.default_rng(11)
+    masks = [bit | (1 << c) for c in range(9)] + [bit | int(m) for m in rng.integers(1, 512, size=12)] + [bit | 511]
+    bad = []
+    for p in strings(6):
+        s = state_of(p)
+        for m in masks:
+            if pc.pc_wanted(s, m) != reference_wanted(p, m):
+                bad.append(("wanted", p, m))
+            if pc.pc_reachable(s, m) != any(reference_wanted(p + e, m) for e in strings(EXT)):
+                bad.append(("reachable", p, m))
+    assert not bad, bad[:10]
+
+
+def test_the_two_camera_ends_partition_every_path():
+    for p in strings(5):
+        s = state_of(p)
+        assert pc.pc_wanted(s, pc.ALL_MASK | pc.MEDIA_TRANSPORT) != pc.pc_wanted(s, pc.ALL_MASK | pc.SURFACE_TRANSPORT)
+        assert pc.pc_wanted(s, pc.ALL_MASK)

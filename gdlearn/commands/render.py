@@ -30,7 +30,7 @@ PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alph
                   "--direct": ("direct", ("sppm", "ppm")),
                   "--volume-radius": ("volume_radius", ("vpm", "bre", "gvpm", "gbre")),
                   "--neighbors": ("neighbors", ("vpm", "bre", "gvpm", "gbre")),
-                  "--transport": ("transport", ("vpm", "bre", "gvpm", "gbre")),
+                  "--transport": ("transport", ("pt", "vpm", "bre", "gvpm", "gbre")),
                   "--samples": ("samples", ("vpm", "gvpm")),
                   "--kernel": ("kernel", ("bre", "gbre")), "--radii": ("radii", ("vpm", "bre"))}
 
@@ -79,8 +79,8 @@ def add_parser(subparsers) -> None:
                    help="vpm/bre/gvpm/gbre: photons per kernel that set the default volume radius, and the k of "
                         "k-NN and variable radii (default 32)")
     p.add_argument("--transport", choices=("all", "media"), default=None,
-                   help="vpm/bre/gvpm/gbre: the full image (default; gvpm/gbre: surface gradients by GPM's shifts) "
-                        "or only light transport ending in the medium")
+                   help="pt/vpm/bre/gvpm/gbre: the full image (default; gvpm/gbre: surface gradients by GPM's "
+                        "shifts) or only light transport ending in the medium (pt: the photon estimators' reference)")
     p.add_argument("--samples", type=int, default=None, metavar="K",
                    help="vpm/gvpm: distance samples per camera path (default 8)")
     p.add_argument("--kernel", choices=("2d", "3d"), default=None,

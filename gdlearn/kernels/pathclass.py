@@ -38,6 +38,17 @@ vertex (the vertex just before that run). Packed in one int64 (counts saturate a
     bits  0-15  n, interior vertices          bits 32-35  flags: diffuse, glossy, specular, medium
     bits 16-31  r, trailing specular run      bits 36-38  class of the last non-specular vertex
                                                           (NO_VERTEX = 4 if none)
+                                              bits 39-40  the camera's end (below)
+
+The camera's end. The classes above are read from the light. Gruson et al. 2018 study the light
+transport *ending in the medium* (their experiments' setting, PHOTONS.md E15): paths whose first
+non-specular vertex seen from the camera is a medium scattering event (E S* M ... L). The state
+also records that vertex's kind (``EYE_NONE`` while the camera prefix is a specular chain,
+``EYE_SURFACE`` for a diffuse or glossy vertex, ``EYE_MEDIUM``), and the mask bit
+``MEDIA_TRANSPORT`` (above the class bits) keeps only paths with ``EYE_MEDIUM``: the quantity the
+volumetric photon estimators compute with ``transport="media"``, here for any integrator that
+pushes the camera path's vertices in order (the path tracer gives its unbiased reference).
+``SURFACE_TRANSPORT`` keeps the complement, so the two images add up to the full one.
 """
 from __future__ import annotations
 
@@ -60,11 +71,19 @@ N_CLASSES = 9
 CLASS_NAMES = ("emission", "direct-lighting", "diffuse-interreflection", "glossy", "specular",
                "caustics", "single-scattering", "multiple-scattering", "volume-caustics")
 ALL_MASK = (1 << N_CLASSES) - 1
+#: mask bits, not classes: keep only paths whose first non-specular camera vertex is a medium
+#: scattering event (light transport ending in the medium), or only the others (its complement:
+#: a surface vertex, or none -- emission seen directly or through a specular chain)
+MEDIA_TRANSPORT = 1 << 16
+SURFACE_TRANSPORT = 1 << 17
+#: the camera's end of a path (state bits 39-40): no non-specular vertex yet, a surface, a medium
+EYE_NONE, EYE_SURFACE, EYE_MEDIUM = 0, 1, 2
 
 NO_VERTEX = 4
 _SAT = 0xFFFF
 _F_SHIFT = 32
 _B_SHIFT = 36
+_E_SHIFT = 39
 # classes that need two or more interior vertices: no bound on the path length helps them
 _LONG_MASK = ((1 << DIFFUSE_INTERREFLECTION) | (1 << GLOSSY) | (1 << SPECULAR) | (1 << CAUSTICS) |
               (1 << MULTIPLE_SCATTERING) | (1 << VOLUME_CAUSTICS))
@@ -97,12 +116,19 @@ def _before(state):
 
 
 @block
+def pc_eye(state):
+    """The kind of the first non-specular vertex from the camera: EYE_NONE, EYE_SURFACE or EYE_MEDIUM."""
+    return (state >> _E_SHIFT) & 0x3
+
+
+@block
 def pc_push(state, vclass):
     """Append one interior vertex of class ``vclass`` (a ``layout.V_*``) at the light end."""
     n = _n(state)
     r = _r(state)
     flags = _flags(state) | (1 << vclass)
     before = _before(state)
+    eye = pc_eye(state)
     if n < _SAT:
         n += 1
     if vclass == V_SPECULAR:
@@ -111,7 +137,23 @@ def pc_push(state, vclass):
     else:
         r = 0
         before = vclass
-    return n | (r << 16) | (flags << _F_SHIFT) | (before << _B_SHIFT)
+        if eye == EYE_NONE:
+            eye = EYE_MEDIUM if vclass == V_MEDIUM else EYE_SURFACE
+    return n | (r << 16) | (flags << _F_SHIFT) | (before << _B_SHIFT) | (eye << _E_SHIFT)
+
+
+@block
+def pc_wanted(state, mask):
+    """Does ``mask`` keep the path made of the pushed vertices followed by a light? Its class bit,
+    and with ``MEDIA_TRANSPORT`` (``SURFACE_TRANSPORT``) a first non-specular camera vertex that is
+    (is not) a medium scattering event."""
+    if (mask >> pc_class(state)) & 1 == 0:
+        return False
+    if (mask & MEDIA_TRANSPORT) != 0:
+        return pc_eye(state) == EYE_MEDIUM
+    if (mask & SURFACE_TRANSPORT) != 0:
+        return pc_eye(state) != EYE_MEDIUM
+    return True
 
 
 @block
@@ -147,9 +189,17 @@ def pc_reachable(state, mask):
     multiple scattering (M, M) are always reachable; specular needs no medium vertex so far (push S
     then D, so the path does not end in a caustic); glossy needs no specular and no medium vertex;
     diffuse interreflection needs only diffuse vertices so far; direct lighting and single
-    scattering need an empty prefix.
+    scattering need an empty prefix. The camera's end: with ``MEDIA_TRANSPORT`` a prefix whose
+    first non-specular vertex is a surface gives nothing, and a specular-only prefix can still
+    reach only the classes holding a medium vertex (the next non-specular vertex must be one); with
+    ``SURFACE_TRANSPORT`` the reverse, and single scattering (``M`` alone) is out.
     """
-    if (mask >> pc_class(state)) & 1:
+    eye = pc_eye(state)
+    media = (mask & MEDIA_TRANSPORT) != 0
+    surfaces = (mask & SURFACE_TRANSPORT) != 0
+    if (media and eye == EYE_SURFACE) or (surfaces and eye == EYE_MEDIUM):
+        return False
+    if pc_wanted(state, mask):
         return True
     flags = _flags(state)
     ext = (1 << CAUSTICS) | (1 << VOLUME_CAUSTICS) | (1 << MULTIPLE_SCATTERING)
@@ -161,6 +211,11 @@ def pc_reachable(state, mask):
             ext |= 1 << GLOSSY
             if (flags >> V_GLOSSY) & 1 == 0:
                 ext |= 1 << DIFFUSE_INTERREFLECTION
+    if eye == EYE_NONE:
+        if media:
+            ext &= (1 << CAUSTICS) | (1 << VOLUME_CAUSTICS) | (1 << MULTIPLE_SCATTERING) | (1 << SINGLE_SCATTERING)
+        elif surfaces:
+            ext &= ~(1 << SINGLE_SCATTERING)
     return (ext & mask) != 0
 
 

@@ -31,6 +31,10 @@ from gdlearn.kernels.arrays import borrowed
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup
 from gdlearn.kernels.jit import block
+from gdlearn.kernels.pathclass import MEDIA_TRANSPORT, SURFACE_TRANSPORT
+
+#: ``transport`` -> the effects-mask bit it sets (kernels.pathclass, "The camera's end")
+TRANSPORT = {"all": 0, "media": MEDIA_TRANSPORT, "surfaces": SURFACE_TRANSPORT}
 from gdlearn.kernels.threads import next_rows, run_rows
 
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
@@ -138,20 +142,32 @@ def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, 
 
 
 class PathTracer(ProgressiveIntegrator):
-    """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, threads=None, max_depth=None,
-    packets=None)``.
+    """``make("pt", scene, seed=0, spp_per_pass=1, effects=None, transport="all", threads=None,
+    max_depth=None, packets=None)``.
 
     ``max_depth``, ``threads`` and ``effects`` as :class:`~gdlearn.integrators.setup.SceneSetup`
     (``self.setup``); ``packets``: None traces in packets where :mod:`gdlearn.integrators.path.packet`
     accepts the scene, False forces the one-path-at-a-time kernel, True insists (ValueError if the
-    scene is not eligible).
+    scene is not eligible). ``transport="media"`` keeps only light transport ending in the medium
+    (the first non-specular camera vertex a medium scattering event, ``pathclass.MEDIA_TRANSPORT``):
+    the unbiased reference of the volumetric photon estimators' ``transport="media"``;
+    ``"surfaces"`` keeps the rest, so the two add up to the full image.
     """
 
     name = "pt"
 
-    def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None,
-                 max_depth=None, sa=None, packets=None):
+    def __init__(self, scene, *, seed: int = 0, spp_per_pass: int = 1, effects=None, transport: str = "all",
+                 threads=None, max_depth=None, sa=None, packets=None):
+        if transport not in TRANSPORT:
+            raise ValueError(f"transport={transport!r}: choose one of {', '.join(TRANSPORT)}")
         self.setup = s = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
+        if transport != "all":
+            if not s.plan.media:
+                raise ValueError(f"transport={transport!r} splits the image at the camera path's first medium "
+                                 "scattering event, and this scene (or its effects plan) has no medium; fix: "
+                                 "transport='all'")
+            s.mask |= TRANSPORT[transport]
+        self.transport = transport
         super().__init__(s.scene, seed=seed, spp_per_pass=spp_per_pass)
         can_pack = not s.media and surface_packet.eligible(s.sa, s.mask, s.max_depth)
         if packets and not can_pack:

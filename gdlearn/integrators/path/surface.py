@@ -33,7 +33,7 @@ from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
-from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push, pc_reachable
+from gdlearn.kernels.pathclass import pc_init, pc_push, pc_reachable, pc_wanted
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.sampling import power_heuristic
 from gdlearn.kernels.scene_query import occluded
@@ -77,8 +77,9 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, 
 
 @inlined
 def _wanted(mask, state):
-    """Does the effects mask ask for the class of a path ending at a light after ``state``?"""
-    return (mask >> pc_class(state)) & 1 == 1
+    """Does the effects mask ask for the class of a path ending at a light after ``state``
+    (and, with ``pathclass.MEDIA_TRANSPORT``, for its camera end)?"""
+    return pc_wanted(state, mask)
 
 
 @noalloc
