@@ -12,11 +12,14 @@ statistics (null / mixed / reconnected / failed, per gathered photon and neighbo
 ``--equal-time S``: vpm, gvpm+l1, gvpm+l2 (the mixed shift) and bre (3D kernel), all with
 ``--transport media``, for S seconds each (JIT excluded, the reconstruction included: the
 experiments module stops rendering early enough for it) on every ``--scenes`` scene, ``--seeds``
-seeds interleaved seed by seed, all at ``--threads`` threads. The reference is a long vpm run
-(``--ref-passes`` passes of ``--ref-photons`` light paths, seed 1000003, independent of the runs)
-rendered once and cached on disk under the benchmark's own folder (``$GDLEARN_CACHE`` or
-``~/.cache/gdlearn``, then ``bench_gvpm/``), keyed by the scene, the resolution, the budget and the
-sources of VPM's pipeline (so an edit of the G-VPM kernels keeps it, an edit of VPM's does not).
+seeds interleaved seed by seed, all at ``--threads`` threads. The reference (``--ref``) is by default
+pt with ``transport="media"`` (``--ref-spp`` samples per pixel, seed 1000003, independent of the
+runs): unbiased, so it holds no kernel's blur (benchmarks/README.md, "The vpm reference cannot judge
+a kernel's size"). ``--ref vpm`` takes a long vpm run instead (``--ref-passes`` passes of
+``--ref-photons`` light paths at ``--ref-radius-scale`` x the default radius), the reference of the
+studies before 2026-12-05. Either is rendered once and cached on disk under the benchmark's own
+folder (``$GDLEARN_CACHE`` or ``~/.cache/gdlearn``, then ``bench_gvpm/``), keyed by the scene, the
+resolution, the budget and the sources of its pipeline (so an edit of the G-VPM kernels keeps it).
 ``--methods`` picks others, the first the ratios' base: G-BRE's study is ``--methods
 bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-frame copy; photon
 subsets on; bre-2d is there too). Prints each method's final relMSE per seed, the ratio base /
@@ -35,12 +38,11 @@ distance to the 32nd volume photon), for each scale and each of ``--methods`` at
 (``--equal-time``, default 20 s), ``--seeds`` seeds: the final relMSE split by
 ``experiments.metrics.bias_variance`` into the kernel's squared bias (the reference's floor and
 blur included) and one run's variance, as ``bench_gpm.py --sweep`` does for surfaces. The vpm
-reference carries its own kernel's blur: at the default radius a sharper estimate reads as biased
-against it (benchmarks/README.md), so a sweep takes a reference of a smaller radius
-(``--ref-radius-scale``) and more passes.
+reference would carry its own kernel's blur (a sharper estimate reads as biased against it), hence
+the pt reference.
 
     flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py --sweep 0.35,0.6,1 --methods vpm,gvpm+l1 \
-        --res 128 --photons 50000 --seeds 3 --scenes scenes/spot-medium.xml --ref-radius-scale 0.25 --ref-passes 256
+        --res 128 --photons 50000 --seeds 3 --scenes scenes/spot-medium.xml
 """
 from __future__ import annotations
 
@@ -132,6 +134,9 @@ REF_SOURCES = ("integrators/photon/volumetric.py", "integrators/photon/volume_ga
                "integrators/photon/volume_estimates.py", "integrators/photon/camera_beams.py",
                "integrators/photon/sppm.py", "photons", "kernels/media")
 REF_SEED = 1_000_003
+#: the sources a pt reference depends on: the volume path tracer and the effects classes
+PT_REF_SOURCES = ("integrators/path/pt.py", "integrators/path/volume.py", "integrators/path/surface.py",
+                  "kernels/pathclass.py", "kernels/media", "kernels/bsdf", "kernels/lights.py")
 
 
 def _ref_key(path, a) -> str:
@@ -145,26 +150,48 @@ def _ref_key(path, a) -> str:
 
 
 def vpm_reference(path, a):
-    """The long vpm run of ``path`` (module docstring), from the cache or rendered now."""
+    """The reference of ``path`` (module docstring, ``--ref``), from the cache or rendered now."""
     import numpy as np
 
     from gdlearn.experiments.references import Reference, cache_dir, load_reference
     from gdlearn.integrators.base import render
 
     folder = cache_dir().parent / "bench_gvpm"
-    file = folder / f"{os.path.basename(path)}-{a.res}-{_ref_key(path, a)}.npz"
+    key = _ref_key(path, a) if a.ref == "vpm" else _pt_ref_key(path, a)
+    file = folder / f"{os.path.basename(path)}-{a.res}-{key}.npz"
     if file.is_file():
         return load_reference(file), 0.0
     t0 = time.perf_counter()
-    integ = make("vpm", load(path, res=a.res), seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads,
-                 transport="media", volume_radius_scale=a.ref_radius_scale)
-    frame = render(integ, spp=2 * a.ref_passes)
+    scene = load(path, res=a.res)
+    if a.ref == "vpm":
+        integ = make("vpm", scene, seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads,
+                     transport="media", volume_radius_scale=a.ref_radius_scale)
+        frame = render(integ, spp=2 * a.ref_passes)
+    else:
+        integ = make("pt", scene, seed=REF_SEED, transport="media", threads=a.threads, spp_per_pass=64)
+        frame = render(integ, spp=a.ref_spp)
     if not np.isfinite(frame.primal).all():
-        raise RuntimeError(f"{path}: the vpm reference has non-finite pixels")
-    ref = Reference(frame.primal, frame.variance(), frame.spp, "vpm", file.stem)
+        raise RuntimeError(f"{path}: the {a.ref} reference has non-finite pixels")
+    ref = Reference(frame.primal, frame.variance(), frame.spp, a.ref, file.stem)
     folder.mkdir(parents=True, exist_ok=True)
     ref.save(file)
     return ref, time.perf_counter() - t0
+
+
+def _pt_ref_key(path, a) -> str:
+    from gdlearn.experiments.references import source_digest
+    h = hashlib.sha256(f"pt media {a.res} {a.ref_spp} {REF_SEED}".encode())
+    h.update(open(path, "rb").read())
+    h.update(source_digest(PT_REF_SOURCES).encode())
+    return h.hexdigest()[:20]
+
+
+def ref_line(path, ref, took, a) -> str:
+    """What the reference is, for the reports."""
+    what = (f"vpm {ref.spp // 2} passes x {a.ref_photons} light paths at {a.ref_radius_scale:g} x the default volume "
+            f"radius" if a.ref == "vpm" else f"pt --transport media, {ref.spp} spp")
+    return (f"{os.path.basename(path)}: reference {what} ({'cached' if took == 0 else f'{took:.0f} s'}), relMSE floor "
+            f"{ref.floor:.2e}")
 
 
 def methods(a, extra=()) -> dict:
@@ -194,9 +221,7 @@ def radius_sweep(a) -> int:
           f"a pass, transport media; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     for path in a.scenes.split(","):
         ref, took = vpm_reference(path, a)
-        print(f"\n{os.path.basename(path)}: reference vpm {ref.spp // 2} passes x {a.ref_photons} light paths at "
-              f"{a.ref_radius_scale:g} x the default volume radius ({'cached' if took == 0 else f'{took:.0f} s'}), "
-              f"relMSE floor {ref.floor:.2e}", flush=True)
+        print("\n" + ref_line(path, ref, took, a), flush=True)
         sf = SceneFile(path, (("res", a.res),))
         for scale in (float(x) for x in a.sweep.split(",")):
             every = methods(a, (("volume_radius_scale", scale),))
@@ -227,8 +252,7 @@ def equal_time_study(a) -> int:
           f"{os.cpu_count()} cores", flush=True)
     for path in a.scenes.split(","):
         ref, took = vpm_reference(path, a)
-        print(f"\n{os.path.basename(path)}: reference vpm {ref.spp // 2} passes x {a.ref_photons} light paths "
-              f"({'cached' if took == 0 else f'{took:.0f} s'}), relMSE floor {ref.floor:.2e}", flush=True)
+        print("\n" + ref_line(path, ref, took, a), flush=True)
         if a.refs_only:
             continue
         sf = SceneFile(path, (("res", a.res),))
@@ -273,6 +297,10 @@ def main(argv=None) -> int:
                                                              "study into locked runs of a few minutes)")
     p.add_argument("--methods", default="vpm,gvpm+l1,gvpm+l2,bre-3d",
                    help="of --equal-time, the first the ratios' base (G-BRE's study: bre-3d,gbre+l1,gbre-2d+l1)")
+    p.add_argument("--ref", choices=("pt", "vpm"), default="pt",
+                   help="the reference: pt --transport media (unbiased, the default) or a long vpm run (it carries "
+                        "its kernel's blur)")
+    p.add_argument("--ref-spp", type=int, default=65536, help="samples per pixel of the pt reference")
     p.add_argument("--ref-passes", type=int, default=64, help="passes of the vpm reference")
     p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
     p.add_argument("--refs-only", action="store_true")

@@ -21,6 +21,7 @@ REGISTRY = {
     "bre": "gdlearn.integrators.photon.volumetric:BRE",
     "gvpm": "gdlearn.integrators.photon.gvpm:GVPM",
     "gbre": "gdlearn.integrators.photon.gbre:GBRE",
+    "lt": "gdlearn.integrators.photon.light_tracing:MediumLightTracer",
 }
 
 
