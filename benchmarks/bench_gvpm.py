@@ -15,12 +15,16 @@ experiments module stops rendering early enough for it) on every ``--scenes`` sc
 seeds interleaved seed by seed, all at ``--threads`` threads. The reference (``--ref``) is by default
 pt with ``transport="media"`` (``--ref-spp`` samples per pixel, seed 1000003, independent of the
 runs): unbiased, so it holds no kernel's blur (benchmarks/README.md, "The vpm reference cannot judge
-a kernel's size"). ``--ref vpm`` takes a long vpm run instead (``--ref-passes`` passes of
+a kernel's size"). ``--ref lt`` (the volume caustic: pt finds it only when a phase sample leaves
+through the lens towards the small light) takes light tracing (``make("lt")``, ``--ref-passes`` x
+``--ref-photons`` light paths) where the camera sees the medium directly and pt's reference where
+it may look through glass. ``--ref vpm`` takes a long vpm run instead (``--ref-passes`` passes of
 ``--ref-photons`` light paths at ``--ref-radius-scale`` x the default radius), the reference of the
 studies before 2026-12-05. Either is rendered once and cached on disk under the benchmark's own
 folder (``$GDLEARN_CACHE`` or ``~/.cache/gdlearn``, then ``bench_gvpm/``), keyed by the scene, the
 resolution, the budget and the sources of its pipeline (so an edit of the G-VPM kernels keeps it).
-``--methods`` picks others, the first the ratios' base: G-BRE's study is ``--methods
+``--methods`` picks others, the first the ratios' base (``name@S`` starts from S x the default
+volume radius, e.g. ``vpm@0.35``): G-BRE's study is ``--methods
 bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-frame copy; photon
 subsets on; bre-2d is there too). Prints each method's final relMSE per seed, the ratio base /
 method (> 1: lower error than the base), its mean, min and max over the seeds, and the same with
@@ -157,7 +161,7 @@ def vpm_reference(path, a):
     from gdlearn.integrators.base import render
 
     folder = cache_dir().parent / "bench_gvpm"
-    key = _ref_key(path, a) if a.ref == "vpm" else _pt_ref_key(path, a)
+    key = {"vpm": _ref_key, "pt": _pt_ref_key, "lt": _lt_ref_key}[a.ref](path, a)
     file = folder / f"{os.path.basename(path)}-{a.res}-{key}.npz"
     if file.is_file():
         return load_reference(file), 0.0
@@ -167,15 +171,37 @@ def vpm_reference(path, a):
         integ = make("vpm", scene, seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads,
                      transport="media", volume_radius_scale=a.ref_radius_scale)
         frame = render(integ, spp=2 * a.ref_passes)
+        image, variance, spp = frame.primal, frame.variance(), frame.spp
+    elif a.ref == "pt":
+        frame = render(make("pt", scene, seed=REF_SEED, transport="media", threads=a.threads, spp_per_pass=64),
+                       spp=a.ref_spp)
+        image, variance, spp = frame.primal, frame.variance(), frame.spp
     else:
-        integ = make("pt", scene, seed=REF_SEED, transport="media", threads=a.threads, spp_per_pass=64)
-        frame = render(integ, spp=a.ref_spp)
-    if not np.isfinite(frame.primal).all():
+        image, variance, spp = _lt_reference(path, scene, a)
+    if not np.isfinite(image).all():
         raise RuntimeError(f"{path}: the {a.ref} reference has non-finite pixels")
-    ref = Reference(frame.primal, frame.variance(), frame.spp, a.ref, file.stem)
+    ref = Reference(image, variance, spp, a.ref, file.stem)
     folder.mkdir(parents=True, exist_ok=True)
     ref.save(file)
     return ref, time.perf_counter() - t0
+
+
+def _lt_reference(path, scene, a):
+    """Light tracing where the camera sees the medium directly, pt where it may look through a
+    specular surface (``light_tracing.specular_view_mask``): (image, variance, passes)."""
+    import numpy as np
+
+    from gdlearn.integrators.base import render
+    from gdlearn.integrators.photon.light_tracing import specular_view_mask
+
+    integ = make("lt", scene, seed=REF_SEED, photons_per_pass=a.ref_photons, threads=a.threads)
+    frame = render(integ, passes=a.ref_passes)
+    mask = specular_view_mask(integ.setup.sa, integ.setup.width, integ.setup.height)[..., None]
+    pa = argparse.Namespace(**{**vars(a), "ref": "pt"})
+    pt, _ = vpm_reference(path, pa)
+    print(f"  lt reference: {frame.passes} passes x {a.ref_photons} light paths, pt ({pt.spp} spp) in the "
+          f"{int(mask.sum())} pixels that may see the medium through a specular surface", flush=True)
+    return (np.where(mask, pt.image, frame.primal), np.where(mask, pt.variance, frame.variance()), frame.passes)
 
 
 def _pt_ref_key(path, a) -> str:
@@ -186,10 +212,18 @@ def _pt_ref_key(path, a) -> str:
     return h.hexdigest()[:20]
 
 
+def _lt_ref_key(path, a) -> str:
+    from gdlearn.experiments.references import source_digest
+    h = hashlib.sha256(f"lt {a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {_pt_ref_key(path, a)}".encode())
+    h.update(source_digest(("integrators/photon/light_tracing.py", "photons") + PT_REF_SOURCES).encode())
+    return h.hexdigest()[:20]
+
+
 def ref_line(path, ref, took, a) -> str:
     """What the reference is, for the reports."""
-    what = (f"vpm {ref.spp // 2} passes x {a.ref_photons} light paths at {a.ref_radius_scale:g} x the default volume "
-            f"radius" if a.ref == "vpm" else f"pt --transport media, {ref.spp} spp")
+    what = {"vpm": f"vpm {ref.spp // 2} passes x {a.ref_photons} light paths at {a.ref_radius_scale:g} x the default "
+                   f"volume radius", "pt": f"pt --transport media, {ref.spp} spp",
+            "lt": f"lt {ref.spp} passes x {a.ref_photons} light paths (pt where glass is seen)"}[a.ref]
     return (f"{os.path.basename(path)}: reference {what} ({'cached' if took == 0 else f'{took:.0f} s'}), relMSE floor "
             f"{ref.floor:.2e}")
 
@@ -205,8 +239,14 @@ def methods(a, extra=()) -> dict:
              "bre-3d": Method("bre-3d", "bre", None, opts + k3), "bre-2d": Method("bre-2d", "bre", None, opts + k2),
              "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
              "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
-    if any(n not in every for n in a.methods.split(",")):
-        raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)}; the first is the ratios' base")
+    for name in a.methods.split(","):
+        base, _, scale = name.partition("@")       # "vpm@0.35": vpm from 0.35 x the default volume radius
+        if base not in every:
+            raise SystemExit(f"--methods {a.methods}: choose from {', '.join(every)} (name@S: from S x the default "
+                             "volume radius); the first is the ratios' base")
+        if scale:
+            m = every[base]
+            every[name] = Method(name, m.estimator, m.solver, m.options + (("volume_radius_scale", float(scale)),))
     return every
 
 
@@ -297,9 +337,11 @@ def main(argv=None) -> int:
                                                              "study into locked runs of a few minutes)")
     p.add_argument("--methods", default="vpm,gvpm+l1,gvpm+l2,bre-3d",
                    help="of --equal-time, the first the ratios' base (G-BRE's study: bre-3d,gbre+l1,gbre-2d+l1)")
-    p.add_argument("--ref", choices=("pt", "vpm"), default="pt",
-                   help="the reference: pt --transport media (unbiased, the default) or a long vpm run (it carries "
-                        "its kernel's blur)")
+    p.add_argument("--ref", choices=("pt", "lt", "vpm"), default="pt",
+                   help="the reference: pt --transport media (unbiased, the default); lt, light tracing where the camera "
+                        "sees the medium directly and pt elsewhere (unbiased; for volume caustics, which pt finds "
+                        "rarely; --ref-passes x --ref-photons light paths); or a long vpm run (it carries its kernel's "
+                        "blur)")
     p.add_argument("--ref-spp", type=int, default=65536, help="samples per pixel of the pt reference")
     p.add_argument("--ref-passes", type=int, default=64, help="passes of the vpm reference")
     p.add_argument("--ref-photons", type=int, default=200_000, help="light paths a pass of the vpm reference")
