@@ -68,3 +68,20 @@ def test_compare_accepts_vpm_and_bre_with_options(tmp_path):
     rows = {line.split()[0]: line.split() for line in r.stdout.splitlines()[1:]}
     assert set(rows) == {"vpm:photons_per_pass=4000", "bre:kernel=2d:photons_per_pass=4000"}, r.stdout
     assert all(np.isfinite(float(v[1])) and float(v[1]) > 0 for v in rows.values())     # relMSE
+
+
+def test_volume_radius_scale_reaches_the_integrator(tmp_path):
+    """--volume-radius-scale S renders what make(..., volume_radius_scale=S) renders."""
+    import gdlearn.scene
+    from gdlearn.integrators import make, render
+
+    out = tmp_path / "a.npy"
+    r = _cli("render", FOG, "--integrator", "gvpm", "--volume-radius-scale", "0.5", "--transport", "media",
+             "--photons", "2000", "--spp", "4", "--seed", "7", "--set", "res=8", "--out", str(out), "--no-progress")
+    assert r.returncode == 0, r.stderr
+    sc = gdlearn.scene.load(FOG, res=8)
+    want = render(make("gvpm", sc, seed=7, volume_radius_scale=0.5, transport="media", photons_per_pass=2000), spp=4)
+    other = render(make("gvpm", sc, seed=7, transport="media", photons_per_pass=2000), spp=4)
+    got = np.load(out)
+    np.testing.assert_array_equal(got, want.primal.astype(got.dtype))
+    assert not np.array_equal(got, other.primal.astype(got.dtype))     # the default (0.2) renders another image

@@ -29,6 +29,7 @@ PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alph
                   "--radius": ("radius", PHOTON_INTEGRATORS), "--radius-scale": ("radius_scale", PHOTON_INTEGRATORS),
                   "--direct": ("direct", ("sppm", "ppm")),
                   "--volume-radius": ("volume_radius", ("vpm", "bre", "gvpm", "gbre")),
+                  "--volume-radius-scale": ("volume_radius_scale", ("vpm", "bre", "gvpm", "gbre")),
                   "--neighbors": ("neighbors", ("vpm", "bre", "gvpm", "gbre")),
                   "--transport": ("transport", ("pt", "vpm", "bre", "gvpm", "gbre")),
                   "--samples": ("samples", ("vpm", "gvpm")),
@@ -73,8 +74,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--direct", choices=("photons", "nee"), default=None,
                    help="sppm/ppm: direct light from photons (default) or by emitter sampling at the gather point")
     p.add_argument("--volume-radius", type=float, default=None, metavar="R",
-                   help="vpm/bre/gvpm/gbre: initial volume kernel radius in scene units (default: the median "
-                        "distance to the --neighbors-th nearest volume photon)")
+                   help="vpm/bre/gvpm/gbre: initial volume kernel radius in scene units (default: "
+                        "--volume-radius-scale x the median distance to the --neighbors-th nearest volume photon)")
+    p.add_argument("--volume-radius-scale", type=float, default=None, metavar="S",
+                   help="vpm/bre/gvpm/gbre: initial volume radius as a multiple of that median distance (default 1; "
+                        "gvpm/gbre 0.2: the gradients afford a smaller kernel, see gdlearn.integrators.photon.gvpm)")
     p.add_argument("--neighbors", type=int, default=None, metavar="N",
                    help="vpm/bre/gvpm/gbre: photons per kernel that set the default volume radius, and the k of "
                         "k-NN and variable radii (default 32)")

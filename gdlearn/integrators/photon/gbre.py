@@ -51,6 +51,7 @@ from gdlearn.integrators.photon import gbre_gather as gb
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
+from gdlearn.integrators.photon.gvpm import VOLUME_RADIUS_SCALE
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
 from gdlearn.integrators.photon.volumetric import BRE
 from gdlearn.photons import bbh as bbh_mod
@@ -77,14 +78,16 @@ def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
 class GBRE(BRE):
     """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, seed=0,
     photons_per_pass=100000, alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None,
-    volume_radius_scale=1.0, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
+    volume_radius_scale=0.2, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
     docstring; ``radius``: the surface part's initial radius, transport="all" only); ``shift`` None is "mixed" for
-    the 3D kernel and the ray-frame copy ("simple") for the 2D one."""
+    the 3D kernel and the ray-frame copy ("simple") for the 2D one. The first volume radius is G-VPM's,
+    ``gvpm.VOLUME_RADIUS_SCALE`` x the BRE's default (there the reasons and the measurements)."""
 
     name = "gbre"
 
     def __init__(self, scene, *, kernel: str = "3d", shift: str | None = None, subsets: bool = True,
-                 transport: str = "all", radii: str = "fixed", **options):
+                 transport: str = "all", radii: str = "fixed", volume_radius_scale: float = VOLUME_RADIUS_SCALE,
+                 **options):
         if shift is None:
             shift = "mixed" if kernel == "3d" else "simple"
         if shift not in SHIFTS:
@@ -96,7 +99,8 @@ class GBRE(BRE):
         if radii != "fixed":
             raise ValueError(f"gbre: radii={radii!r} has no shift (a photon's k-NN or variable radius is not "
                              "defined where the shift moves it); fix: drop --radii (one global radius schedule)")
-        super().__init__(scene, kernel=kernel, transport=transport, radii="fixed", **options)
+        super().__init__(scene, kernel=kernel, transport=transport, radii="fixed",
+                         volume_radius_scale=volume_radius_scale, **options)
         self.shift, self.subsets = shift, bool(subsets)
         self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets)
         self.wsub = subset_weights(self.n_half, self.subsets)
