@@ -40,7 +40,7 @@ import time
 import numpy as np
 
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
-from gdlearn.integrators.setup import UNBOUNDED, SceneSetup
+from gdlearn.integrators.setup import SceneSetup
 from gdlearn.integrators.path.volume import shadow_transmittance
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_delta_only, bsdf_is_null
@@ -50,7 +50,7 @@ from gdlearn.kernels.jit import block
 from gdlearn.kernels.media.medium import medium_params
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.photons.records import K_MEDIUM
-from gdlearn.integrators.photon.sppm import MAX_LIGHT_VERTICES
+from gdlearn.integrators.photon.sppm import path_bound
 from gdlearn.photons.trace import LightTracer, TraceParams
 
 
@@ -75,9 +75,7 @@ def splat_volume_photons(sa, pos, d_in, beta, kind, obj, inv_n, out, stack):
         t2 = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
         t = math.sqrt(t2)
         wc = (dv[0] / t, dv[1] / t, dv[2] / t)            # from b towards the camera
-        cos_t = -(wc[0] * fwd[0] + wc[1] * fwd[1] + wc[2] * fwd[2])
-        if not cos_t > 0.0:
-            continue
+        cos_t = -(wc[0] * fwd[0] + wc[1] * fwd[1] + wc[2] * fwd[2])    # > 0: camera_raster's ok says so
         tr = shadow_transmittance(sa, o, zero, b, sa.camera_medium, stack)
         if tr[0] == 0.0 and tr[1] == 0.0 and tr[2] == 0.0:
             continue
@@ -140,8 +138,7 @@ class MediumLightTracer(ProgressiveIntegrator):
             raise ValueError("lt traces light into a participating medium, and this scene has none; fix: render it "
                              "with --integrator pt")
         self.photons_per_pass = max(1, int(photons_per_pass))
-        md = s.max_depth if s.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
-        params = TraceParams(max(0, md - 1), s.rr_depth, s.threshold, True, True, want_volume=True)
+        params = TraceParams(max(0, path_bound(s) - 1), s.rr_depth, s.threshold, True, True, want_volume=True)
         self.tracer = LightTracer(s.sa, params, threads=threads)
         self.stack = np.empty(STACK_SIZE, dtype=np.int32)
 

@@ -53,6 +53,12 @@ from gdlearn.integrators.photon.gather import GatherOut, GatherParams, gather_ro
 FOOTPRINT_SAMPLE = 1 << 40
 #: light-path length bound when max_depth is unbounded (Russian roulette ends paths long before)
 MAX_LIGHT_VERTICES = 64
+
+
+def path_bound(setup) -> int:
+    """The longest path (Mitsuba's max_depth, in segments) a photon estimator traces: the scene's,
+    or MAX_LIGHT_VERTICES + 1 when it is unbounded (-1)."""
+    return setup.max_depth if setup.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
 #: how sppm / ppm estimate the direct light (SurfacePhotonMapper)
 DIRECT = ("photons", "nee")
 #: the photon subsets by parent vertex (GatherParams.parents is the index): every photon, specular parents, the rest
@@ -130,7 +136,7 @@ class SurfacePhotonMapper(PhotonPassIntegrator):
         _refuse(s)
         self.alpha, self.radius0, self.radius_scale = float(alpha), radius, float(radius_scale)
         self.n_half = self.photons_per_pass // 2
-        md = s.max_depth if s.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
+        md = path_bound(s)
         mask = s.mask
         # surface estimators: medium vertices are never photons (and _refuse keeps media out)
         self.trace_params = TraceParams(max(0, md - 1), s.rr_depth, s.threshold,

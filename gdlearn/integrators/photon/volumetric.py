@@ -55,7 +55,7 @@ from gdlearn.integrators.base import PassResult
 from gdlearn.integrators.combine import MeanOfPasses
 from gdlearn.integrators.photon_base import PhotonPassIntegrator
 from gdlearn.integrators.photon.gather import GatherParams
-from gdlearn.integrators.photon.sppm import (FOOTPRINT_SAMPLE, MAX_LIGHT_VERTICES, accumulate_density,
+from gdlearn.integrators.photon.sppm import (FOOTPRINT_SAMPLE, accumulate_density, path_bound,
                                              ppm_radius2_factor, reduce_radius)
 from gdlearn.integrators.photon import volume_gather as vg
 from gdlearn.integrators.setup import UNBOUNDED, SceneSetup
@@ -97,7 +97,7 @@ class VolumetricPhotonMapper(PhotonPassIntegrator):
         self.volume_radius0, self.volume_radius_scale = volume_radius, float(volume_radius_scale)
         self.neighbors, self.transport = int(neighbors), transport
         self.n_half = self.photons_per_pass // 2
-        md = s.max_depth if s.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
+        md = path_bound(s)
         mask = s.mask
         surfaces = transport == "all"
         # Surface photons after a medium vertex (L M D E, L S M D E) belong to the medium classes, so
