@@ -143,17 +143,22 @@ PT_REF_SOURCES = ("integrators/path/pt.py", "integrators/path/volume.py", "integ
                   "kernels/pathclass.py", "kernels/media", "kernels/bsdf", "kernels/lights.py")
 
 
-def _ref_key(path, a) -> str:
+def _digest(path, text: str, sources) -> str:
+    """A reference's cache key: ``text`` (its kind and budget), the scene file and ``sources``."""
     from gdlearn.experiments.references import source_digest
-    # the reference's radius enters the key only when it is not the default, so old caches stay valid
-    scale = "" if a.ref_radius_scale == 1.0 else f" {a.ref_radius_scale!r}"
-    h = hashlib.sha256(f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}{scale}".encode())
+    h = hashlib.sha256(text.encode())
     h.update(open(path, "rb").read())
-    h.update(source_digest(REF_SOURCES).encode())
+    h.update(source_digest(sources).encode())
     return h.hexdigest()[:20]
 
 
-def vpm_reference(path, a):
+def _ref_key(path, a) -> str:
+    # the reference's radius enters the key only when it is not the default, so old caches stay valid
+    scale = "" if a.ref_radius_scale == 1.0 else f" {a.ref_radius_scale!r}"
+    return _digest(path, f"{a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {a.threads}{scale}", REF_SOURCES)
+
+
+def reference(path, a):
     """The reference of ``path`` (module docstring, ``--ref``), from the cache or rendered now."""
     import numpy as np
 
@@ -198,25 +203,19 @@ def _lt_reference(path, scene, a):
     frame = render(integ, passes=a.ref_passes)
     mask = specular_view_mask(integ.setup.sa, integ.setup.width, integ.setup.height)[..., None]
     pa = argparse.Namespace(**{**vars(a), "ref": "pt"})
-    pt, _ = vpm_reference(path, pa)
+    pt, _ = reference(path, pa)
     print(f"  lt reference: {frame.passes} passes x {a.ref_photons} light paths, pt ({pt.spp} spp) in the "
           f"{int(mask.sum())} pixels that may see the medium through a specular surface", flush=True)
     return (np.where(mask, pt.image, frame.primal), np.where(mask, pt.variance, frame.variance()), frame.passes)
 
 
 def _pt_ref_key(path, a) -> str:
-    from gdlearn.experiments.references import source_digest
-    h = hashlib.sha256(f"pt media {a.res} {a.ref_spp} {REF_SEED}".encode())
-    h.update(open(path, "rb").read())
-    h.update(source_digest(PT_REF_SOURCES).encode())
-    return h.hexdigest()[:20]
+    return _digest(path, f"pt media {a.res} {a.ref_spp} {REF_SEED}", PT_REF_SOURCES)
 
 
 def _lt_ref_key(path, a) -> str:
-    from gdlearn.experiments.references import source_digest
-    h = hashlib.sha256(f"lt {a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {_pt_ref_key(path, a)}".encode())
-    h.update(source_digest(("integrators/photon/light_tracing.py", "photons") + PT_REF_SOURCES).encode())
-    return h.hexdigest()[:20]
+    return _digest(path, f"lt {a.res} {a.ref_passes} {a.ref_photons} {REF_SEED} {_pt_ref_key(path, a)}",
+                   ("integrators/photon/light_tracing.py", "photons") + PT_REF_SOURCES)
 
 
 def ref_line(path, ref, took, a) -> str:
@@ -260,7 +259,7 @@ def radius_sweep(a) -> int:
     print(f"volume radius sweep: {seconds:.1f} s per run, {a.res}x{a.res}, {a.seeds} seeds, {a.photons} light paths "
           f"a pass, transport media; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     for path in a.scenes.split(","):
-        ref, took = vpm_reference(path, a)
+        ref, took = reference(path, a)
         print("\n" + ref_line(path, ref, took, a), flush=True)
         sf = SceneFile(path, (("res", a.res),))
         for scale in (float(x) for x in a.sweep.split(",")):
@@ -291,7 +290,7 @@ def equal_time_study(a) -> int:
           f"pass, {a.threads} threads, transport media; load average {os.getloadavg()[0]:.2f} on "
           f"{os.cpu_count()} cores", flush=True)
     for path in a.scenes.split(","):
-        ref, took = vpm_reference(path, a)
+        ref, took = reference(path, a)
         print("\n" + ref_line(path, ref, took, a), flush=True)
         if a.refs_only:
             continue
