@@ -6,15 +6,18 @@ report 1.5-3.5x), the stage split, and gpm's photon-shift statistics (reconnecte
 moved by the manifold walk, per gathered photon and shift).
 
     .venv/bin/python benchmarks/bench_gpm.py [--scenes scenes/cornell-box.xml,...] [--res 128]
-        [--photons 200000] [--repeats 4]
+        [--photons 100000] [--repeats 4]
 
 ``--equal-time S``: sppm, gpm (its MIS primal), gpm+l1, gpm+l2 and pt for S seconds each (JIT
 excluded, reconstruction included) on every scene, ``--seeds`` seeds interleaved seed by seed,
 against Mitsuba 3's image (``--ref-spp`` spp over 8 seeds, llvm_ad_rgb, cached); prints each
 method's final relMSE per seed and the ratio sppm / method (> 1: lower error than SPPM), also with
-the reference's noise floor subtracted from both errors.
+the reference's noise floor subtracted from both errors. ``--photons`` defaults to the photon
+integrators' own 100k light paths a pass. A path tracer's reference of a caustic is noisy: at 128²
+the caustics box's floor was 3.5e-4 at 16384 spp, a third of gpm's error; issue 15's study took
+262144 spp there (~20 min, once: the reference is cached) and 65536 on the other scenes.
 
-    .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3
+    .venv/bin/python benchmarks/bench_gpm.py --equal-time 20 --res 128 --seeds 3 --ref-spp 65536
 
 ``--sweep SCALES``: the first kernel radius, ``radius_scale`` x the pixel footprint, for each scale
 and each method of ``--methods`` (e.g. sppm,gpm+l1) at equal time (``--equal-time``, default 20 s)
@@ -223,12 +226,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=SCENES)
     ap.add_argument("--res", type=int, default=128)
-    ap.add_argument("--photons", type=int, default=200_000, help="light paths per pass")
+    ap.add_argument("--photons", type=int, default=100_000, help="light paths per pass (the integrators' default)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=4)
     ap.add_argument("--equal-time", type=float, default=None, metavar="S")
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--ref-spp", type=int, default=16384)
+    ap.add_argument("--ref-spp", type=int, default=65536)
     ap.add_argument("--methods", default="sppm,gpm,gpm+l1,gpm+l2,pt", help="of --equal-time; sppm first (the ratios' base)")
     ap.add_argument("--kernel", action="store_true", help="old vs new camera pass alone (module docstring)")
     ap.add_argument("--fig4", action="store_true", help="Hua et al. 2017 Fig. 4 (module docstring)")
