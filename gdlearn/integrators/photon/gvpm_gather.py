@@ -34,7 +34,8 @@ Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample
 collected once (row and base term, per-row scratch), then each neighbour runs over them with its
 D_k, S_k and counts in registers, summed in photon order -- the buffers are bit for bit those of
 one write per photon and shift (tests/test_gvpm_fast.py against tests/_gvpm_reference.py) --, and
-a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_light.base_edge``).
+a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_light.base_edge``),
+and the offset camera paths are traced only for a camera sample whose distance samples find a photon.
 
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
@@ -142,12 +143,19 @@ def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
             r = radius[y, x]
             if nb == 0 or not r > 0.0:
                 continue
-            for k in range(4):
-                o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
-                                       beams, bstate, nb, obeams[k], obstate[k])
-            nbad += _samples(sa, lp, grids[hh], mtab, prm, gv, h, (beams, bstate, nb), (obeams, o_ok), r, scr,
-                             stack, out, hh, y, x)
+            nbad += _samples(sa, lp, grids[hh], mtab, prm, gv, h, (beams, bstate, nb), (obeams, obstate, o_ok),
+                             (fx, fy, w, hgt), r, scr, stack, out, hh, y, x)
     return nbad
+
+
+@inlined
+def _offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs, y, x):
+    """The four neighbours' offset camera paths of a camera sample (step 2 of the module docstring)."""
+    fx, fy, w, hgt = film
+    obeams, obstate, o_ok = offs
+    for k in range(4):
+        o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack, beams, bstate,
+                               nb, obeams[k], obstate[k])
 
 
 @block
@@ -210,13 +218,18 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
 
 
 @block
-def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, r, scr, stack, out, hh, y, x):
-    """VPM's K distance samples of one camera path, their photons and the photons' shifts."""
+def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, out, hh, y, x):
+    """VPM's K distance samples of one camera path, their photons and the photons' shifts. The
+    offset camera paths and gather points are made only when a distance sample finds a photon (at
+    gvpm's small kernel most find none: 70-80 % of the camera samples on the spot light and the
+    volume caustic); they depend on the camera sample's random numbers alone, so the buffers are
+    those of making them first."""
     beams, bstate, nb = base
     og = scr.og
     K = gv.samples
     cnt = 0
     nbad = 0
+    traced = False
     for k in range(K):
         b, pb = _pick_beam(beams, nb, rand_at(h, D_VOL + 2 * k))
         if b < 0:
@@ -232,12 +245,17 @@ def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, r, scr, stack, out, hh,
         tr = transmittance(sig, t)
         k0 = 1.0 / (pdf * pb * K)
         cw = (beams[b, BEAM_W] * tr[0] * k0, beams[b, BEAM_W + 1] * tr[1] * k0, beams[b, BEAM_W + 2] * tr[2] * k0)
-        _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og)
         dg = _point(beams, b, t)
         dc = (beams[b, BEAM_D], beams[b, BEAM_D + 1], beams[b, BEAM_D + 2])
         n, nbad0 = _collect(lp, grid, prm, (med, int(bstate[b, 1]), bstate[b, 0]), g, dg, dc, cw, r, scr, out, hh, y, x)
         cnt += n
         nbad += nbad0
+        if n == 0:
+            continue                  # no photon to shift: D_k, S_k and the counts would not change
+        if not traced:
+            _offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs, y, x)
+            traced = True
+        _offset_gather((offs[0], offs[2]), nb, b, t, sbar, pb, pdf, tr, k0, og)
         for j in range(4):
             nbad += _neighbour(sa, lp, mtab, scr, n, dg, g, r, gv.mixed, og, j, stack, out, hh, y, x)
     out.m[hh, y, x] = cnt
