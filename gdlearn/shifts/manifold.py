@@ -21,9 +21,11 @@ Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sa
 offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|
 (base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
 theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
-G(x_b .. x_c) / G(x_b, x_1). A and B are central differences of the constraint function (step
-1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10 from round-off),
-which replaces Jakob's analytic second-order surface derivatives.
+G(x_b .. x_c) / G(x_b, x_1). For the Jacobian, A and B are central differences of the constraint
+function (step 1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10
+from round-off), which replaces Jakob's analytic second-order surface derivatives. A walk's step
+takes A alone by forward differences (:func:`walk_jacobian`: a third of the constraint evaluations
+for k = 2; Newton's convergence does not need A's last digits).
 
 Geometry of the chain: each chain vertex lies on an analytic surface given as a row of ``shapes``
 (``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
@@ -58,6 +60,9 @@ MAX_ITER = 5
 MAX_HALVINGS = 10
 TOL = 1e-12
 FD_REL_STEP = 1e-6
+#: a walk step's forward differences: ~sqrt(machine epsilon), where truncation and round-off are
+#: both ~1e-8 of A (:func:`walk_jacobian`)
+WALK_FD_REL_STEP = 1e-8
 
 
 def plane_row(point, normal, u_axis, extent=(math.inf, math.inf)):
@@ -238,6 +243,32 @@ def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, 
     return True
 
 
+@block
+def walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xp, cp):
+    """The Newton matrix A = dC/dX of a walk step by forward differences from C = C(X), into A; Xp
+    (k x 3) and cp (2k) are scratch. A step needs no endpoint columns B and no second-order
+    accuracy: an error of ~1e-8 in A only adds a linear term ~1e-8 |C| to Newton's quadratic
+    convergence, and the walk's tolerance is on C itself. That is 2k constraint evaluations a
+    step instead of central differences' 4(k + 1). (The Jacobian of the shift, Eq. 8, keeps
+    central differences: :func:`chain_endpoint_det`.) False if a probe is invalid."""
+    m = 2 * k
+    h = WALK_FD_REL_STEP * chain_length_scale(x0, X, xe, k)
+    if not (h > 0.0 and math.isfinite(h)):
+        return False                        # a collapsed or non-finite chain
+    Xp[:] = X
+    for j in range(k):
+        xj = _v3(X, j, 0)
+        for a in range(2):
+            p = shape_chart(shapes, j, xj, h if a == 0 else 0.0, h if a == 1 else 0.0)
+            Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
+            if not constraints(x0, Xp, xe, shapes, etas, refract, targets, k, cp):
+                return False
+            for r in range(m):
+                A[r, 2 * j + a] = (cp[r] - C[r]) / h
+        Xp[j, 0], Xp[j, 1], Xp[j, 2] = xj[0], xj[1], xj[2]
+    return True
+
+
 @inlined
 def _moved(X, dX, lam, shapes, k, Xn):
     for j in range(k):
@@ -254,14 +285,13 @@ def _norm2(a, m):
 
 
 @block
-def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
+def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
     """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
     chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
     m = 2 * k
     C = np.empty(m)
     Cn = np.empty(m)
     A = np.empty((m, m))
-    B = np.empty((m, 2))
     dX = np.empty((m, 1))
     Xn = X.copy()
     if not constraints(x0, X, xe, shapes, etas, refract, targets, k, C):
@@ -270,7 +300,7 @@ def manifold_walk(x0, xe, ne, X, shapes, etas, refract, targets, k, max_iter, ma
     for it in range(max_iter):
         if r < tol:
             return True, it, r
-        if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+        if not walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xn, Cn):
             return False, it, r
         for i in range(m):
             dX[i, 0] = -C[i]
@@ -325,11 +355,11 @@ def half_vector_targets(x0, X, xe, shapes, etas, refract, k, targets):
 
 
 @block
-def _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract, targets, k, max_iter):
+def _walks_back(x_b, X_base, x_c, Xo, shapes, etas, refract, targets, k, max_iter):
     """True if the walk from the offset chain back to x_b returns to the base chain: near a caustic
     several chains join the same endpoints and the shift would not be invertible there."""
     Xb = Xo.copy()
-    ok, _, _ = manifold_walk(x_b, x_c, n_c, Xb, shapes, etas, refract, targets, k, max_iter,
+    ok, _, _ = manifold_walk(x_b, x_c, Xb, shapes, etas, refract, targets, k, max_iter,
                              MAX_HALVINGS, TOL)
     if not ok:
         return False
@@ -359,7 +389,7 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
         return 0.0, False, 0
     X_out[:k] = X_base[:k]
     Xo = X_out[:k]
-    ok, iters, _ = manifold_walk(x_b_offset, x_c, n_c, Xo, shapes, etas, refract, targets, k,
+    ok, iters, _ = manifold_walk(x_b_offset, x_c, Xo, shapes, etas, refract, targets, k,
                                  max_iter, MAX_HALVINGS, TOL)
     if not ok:
         return 0.0, False, iters
@@ -370,7 +400,7 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
     j = det_o / det_b
     if not (j > 0.0 and math.isfinite(j)):
         return 0.0, False, iters
-    if check_reversible and not _walks_back(x_b, X_base, x_c, n_c, Xo, shapes, etas, refract,
+    if check_reversible and not _walks_back(x_b, X_base, x_c, Xo, shapes, etas, refract,
                                             targets, k, max_iter):
         return 0.0, False, iters
     return j, True, iters

@@ -116,20 +116,19 @@ def load_chain(sa, lp, mtab, v, rows, k):
 
 
 @block
-def walk_both_ways(yb, X, ys, ns, ye, ne, shapes, etas, refr, k):
+def walk_both_ways(yb, X, ys, ye, shapes, etas, refr, k):
     """Walk the base chain X (y_b .. y_s) to the offset endpoint ye and back: the walk back must
-    find the base chain again (the shift is invertible). ns, ne: the endpoints' chart normals (the
-    walk holds its endpoint fixed; its derivative probes still move it in that chart). Returns (ok,
-    offset chain X', the base's half-vector targets, which Eq. 8's determinants take)."""
+    find the base chain again (the shift is invertible). Returns (ok, offset chain X', the base's
+    half-vector targets, which Eq. 8's determinants take)."""
     targets = np.empty((k, 2))
     Xo = X.copy()
     if not M.half_vector_targets(yb, X, ys, shapes, etas, refr, k, targets):
         return False, Xo, targets
-    ok, _, _ = M.manifold_walk(yb, ye, ne, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+    ok, _, _ = M.manifold_walk(yb, ye, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
     if not ok:
         return False, Xo, targets
     Xb = Xo.copy()
-    ok, _, _ = M.manifold_walk(yb, ys, ns, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+    ok, _, _ = M.manifold_walk(yb, ys, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
     if not ok:
         return False, Xo, targets
     tol = 1e-7 * M.chain_length_scale(yb, X, ys, k)
@@ -237,7 +236,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
     X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
     yb = yb_of(lp, b)
-    ok, Xo, targets = walk_both_ways(yb, X, ys, ns_v, yh, ngh, shapes, etas, refr, k)
+    ok, Xo, targets = walk_both_ways(yb, X, ys, yh, shapes, etas, refr, k)
     if not ok:
         return False, _ZERO, 0.0, _ZERO
     ok, det_b, det_o = endpoint_dets(yb, X, ys, ns_v, Xo, yh, ngh, shapes, etas, refr, targets, k)
@@ -282,12 +281,11 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
     X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
     yb = yb_of(lp, b)
-    # each endpoint's chart lies across its own last segment (module docstring); the offset's is
-    # known once the walk has moved y'_{s-1}, so the walk's probes use the base's
-    w_b, _ = _dir(yq, ys)
-    ok, Xo, targets = walk_both_ways(yb, X, ys, w_b, b_off, w_b, shapes, etas, refr, k)
+    ok, Xo, targets = walk_both_ways(yb, X, ys, b_off, shapes, etas, refr, k)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
+    # each endpoint's chart lies across its own last segment (module docstring)
+    w_b, _ = _dir(yq, ys)
     a_o = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
     w_o, l_o = _dir(a_o, b_off)
     ok, det_b, det_o = endpoint_dets(yb, X, ys, w_b, Xo, b_off, w_o, shapes, etas, refr, targets, k)
