@@ -43,8 +43,8 @@ Organisation (for speed; benchmarks/README.md, G-BRE section), G-VPM's recipe
 (``gvpm_light.base_edge``) is walked at most once for its four neighbours, and only if one of them
 reconnects; a pixel half's L, D_k, S_k and shift counts are summed in a row scratch in photon order
 (beam by beam, photon by photon, neighbour by neighbour: each buffer sees the same additions in the
-same order as one write per term) and written once; the per-photon helpers are inlined. The
-buffers are bit for bit those of the straightforward kernel (tests/test_gbre_fast.py against
+same order as one write per term) and written once; the per-photon helpers are inlined; a camera
+sample's offset camera paths are traced when its first photon is found. The buffers are bit for bit those of the straightforward kernel (tests/test_gbre_fast.py against
 tests/_gbre_reference.py).
 
 Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
@@ -97,6 +97,7 @@ class Scratch(NamedTuple):
     acc: np.ndarray       # (9, 3): the pixel half's L, D_k, S_k, summed in photon order, written once
     cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts null / mixed / reconnected / failed / manifold
     edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
+    traced: np.ndarray    # (1,) bool: the camera sample's offset camera paths are traced (_trace_offsets)
 
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -199,7 +200,7 @@ def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
             np.empty((MAX_BEAMS, 2), dtype=np.int64), np.empty((4, MAX_BEAMS, BEAM_COLS)),
             np.empty((4, MAX_BEAMS, 2), dtype=np.int64), np.zeros(4, dtype=np.bool_))
     scr = Scratch(np.empty(nmax, dtype=np.int64), np.empty(3), np.empty(3), np.empty((9, 3)),
-                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)))
+                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)), np.zeros(1, dtype=np.bool_))
     return _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
 
 
@@ -213,7 +214,7 @@ def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, s
     stack, beams, bstate = borrow(work[0]), borrow(work[1]), borrow(work[2])
     obeams, obstate, o_ok = borrow(work[3]), borrow(work[4]), borrow(work[5])
     scr = Scratch(borrow(scr.buf), borrow(scr.oa), borrow(scr.da), borrow(scr.acc), borrow(scr.cnt),
-                  borrow(scr.edge))
+                  borrow(scr.edge), borrow(scr.traced))
     for x in range(w):
         par = (x + y) & 1 if gp.subsets else 0
         for hh in range(2):
@@ -224,14 +225,12 @@ def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, s
             nb = beam_path(sa, prm, h, o, d, stack, beams, bstate)[11]
             if nb == 0:
                 continue
-            for k in range(4):
-                o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack,
-                                       beams, bstate, nb, obeams[k], obstate[k])
+            scr.traced[0] = False           # the offset camera paths wait for the first photon (_beam)
             _load_sums(out, hh, y, x, scr)
             cnt = 0
             for b in range(nb):
-                c, bad = _beam(sa, lp, bbhs[2 * hh + par], mtab, prm, gp, h, (beams, bstate, b), (obeams, o_ok), r,
-                               wsub[hh, par], scr, stack)
+                c, bad = _beam(sa, lp, bbhs[2 * hh + par], mtab, prm, gp, h, (beams, bstate, b, nb),
+                               (obeams, obstate, o_ok), (fx, fy, x, y, w, hgt), r, wsub[hh, par], scr, stack)
                 cnt += c
                 nbad += bad
             _store_sums(out, hh, y, x, scr)
@@ -258,11 +257,23 @@ def _store_sums(out, hh, y, x, scr):
         out.count[hh, i, y, x] += scr.cnt[i]
 
 
+@inlined
+def _trace_offsets(sa, prm, h, film, stack, beams, bstate, nb, offs):
+    """The four neighbours' offset camera paths of a camera sample, traced when its first photon is
+    found: most camera samples find none at G-BRE's small kernel, and the paths depend on the
+    sample's random numbers alone, so the buffers are those of tracing them first."""
+    fx, fy, x, y, w, hgt = film
+    obeams, obstate, o_ok = offs
+    for k in range(4):
+        o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack, beams, bstate,
+                               nb, obeams[k], obstate[k])
+
+
 @block
-def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, r, ws, scr, stack):
+def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
     """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
     shifts, into the pixel half's sums: (photons counted, non-finite terms dropped)."""
-    beams, bstate, b = base
+    beams, bstate, b, nb = base
     med = int(beams[b, BEAM_MED])
     sig, alb, g = medium_params(sa.media[med])
     for c in range(3):
@@ -297,9 +308,12 @@ def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, r, ws, scr, stack):
         for c in range(3):
             acc[0, c] += c_b[c]
         pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
+        if not scr.traced[0]:
+            _trace_offsets(sa, prm, h, film, stack, beams, bstate, nb, offs)
+            scr.traced[0] = True
         # the base's chord half-length through v's ball (3D), from the same perp() as the kernel's
-        nbad += _shift_photon(sa, lp, mtab, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), offs, pre, c_b, scr,
-                              stack)
+        nbad += _shift_photon(sa, lp, mtab, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), (offs[0], offs[2]), pre,
+                              c_b, scr, stack)
     return cnt, nbad
 
 
