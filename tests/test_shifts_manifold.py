@@ -255,3 +255,28 @@ def test_singular_system_is_reported():
     B = np.array([[3.0], [5.0]])
     assert M.solve_linear(A.copy(), B, 2, 1)
     assert np.allclose(B[:, 0], np.linalg.solve(A, [3.0, 5.0]))
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_walk_step_matrix_matches_central_differences(name):
+    """A walk step's A = dC/dX (forward differences, M.walk_jacobian) against the central differences
+    the shift's Jacobian uses (M.constraint_derivatives) on random base chains of every test scene.
+    Forward differences at 1e-8 of the chain's length are good to ~1e-8 of A's scale (truncation and
+    round-off alike); central ones to ~1e-10. 1e-6 of the largest entry leaves two orders of margin
+    and still fails a wrong step, a swapped column or a missed chart move (errors of order 1)."""
+    rng = np.random.default_rng(7 + sum(map(ord, name)))
+    sc, cfgs = _configs(name, rng, 10)
+    for x_b, x1, _ in cfgs:
+        chain, x_c = sc.trace_chain(x_b, x1)
+        X = np.array(chain, float)
+        k, m = sc.k, 2 * sc.k
+        targets = np.zeros((k, 2))
+        assert M.half_vector_targets(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, k, targets)
+        C = np.empty(m)
+        assert M.constraints(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, targets, k, C)
+        A_walk, A_ref, B = np.empty((m, m)), np.empty((m, m)), np.empty((m, 2))
+        assert M.walk_jacobian(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, targets, k, C, A_walk,
+                               np.empty((k, 3)), np.empty(m))
+        assert M.constraint_derivatives(T(x_b), X, T(x_c), (0.0, 0.0, 1.0), sc.rows, sc.etas, sc.refract, targets,
+                                        k, A_ref, B)
+        assert np.max(np.abs(A_walk - A_ref)) <= 1e-6 * np.max(np.abs(A_ref)), name
