@@ -300,6 +300,7 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
     for it in range(max_iter):
         if r < tol:
             return True, it, r
+        # Xn, Cn serve as the probes' scratch until the step below fills them
         if not walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xn, Cn):
             return False, it, r
         for i in range(m):

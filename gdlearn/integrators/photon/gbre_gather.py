@@ -44,8 +44,8 @@ Organisation (for speed; benchmarks/README.md, G-BRE section), G-VPM's recipe
 reconnects; a pixel half's L, D_k, S_k and shift counts are summed in a row scratch in photon order
 (beam by beam, photon by photon, neighbour by neighbour: each buffer sees the same additions in the
 same order as one write per term) and written once; the per-photon helpers are inlined; a camera
-sample's offset camera paths are traced when its first photon is found. The buffers are bit for bit those of the straightforward kernel (tests/test_gbre_fast.py against
-tests/_gbre_reference.py).
+sample's offset camera paths are traced when its first photon is found. The buffers are bit for
+bit those of the straightforward kernel (tests/test_gbre_fast.py against tests/_gbre_reference.py).
 
 Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
 kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed /
@@ -72,13 +72,12 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED,
     beam_path
 from gdlearn.integrators.photon.photon_shift_loop import finite3
 from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED, C_NULL, C_RECONNECTED, N_COUNTS, \
-    GvpmOut, _offset_path
+    GvpmOut, offset_paths
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
     store_edge
 from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
 from gdlearn.shifts.volume_photon import NULL, REFLECTED, TRANSLATED, camera_distance_copy, chord_half, \
     photon_shift, ray_frame_copy
 
@@ -97,7 +96,7 @@ class Scratch(NamedTuple):
     acc: np.ndarray       # (9, 3): the pixel half's L, D_k, S_k, summed in photon order, written once
     cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts null / mixed / reconnected / failed / manifold
     edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
-    traced: np.ndarray    # (1,) bool: the camera sample's offset camera paths are traced (_trace_offsets)
+    traced: np.ndarray    # (1,) bool: the camera sample's offset camera paths are traced (offset_paths)
 
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -257,18 +256,6 @@ def _store_sums(out, hh, y, x, scr):
         out.count[hh, i, y, x] += scr.cnt[i]
 
 
-@inlined
-def _trace_offsets(sa, prm, h, film, stack, beams, bstate, nb, offs):
-    """The four neighbours' offset camera paths of a camera sample, traced when its first photon is
-    found: most camera samples find none at G-BRE's small kernel, and the paths depend on the
-    sample's random numbers alone, so the buffers are those of tracing them first."""
-    fx, fy, x, y, w, hgt = film
-    obeams, obstate, o_ok = offs
-    for k in range(4):
-        o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack, beams, bstate,
-                               nb, obeams[k], obstate[k])
-
-
 @block
 def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
     """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
@@ -308,8 +295,8 @@ def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
         for c in range(3):
             acc[0, c] += c_b[c]
         pre = (tr[0] * lp.beta[v, 0] * kw * ws, tr[1] * lp.beta[v, 1] * kw * ws, tr[2] * lp.beta[v, 2] * kw * ws)
-        if not scr.traced[0]:
-            _trace_offsets(sa, prm, h, film, stack, beams, bstate, nb, offs)
+        if not scr.traced[0]:                 # most camera samples find no photon at G-BRE's small kernel
+            offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs)
             scr.traced[0] = True
         # the base's chord half-length through v's ball (3D), from the same perp() as the kernel's
         nbad += _shift_photon(sa, lp, mtab, v, gp, g, (o, d, b, t, r, chord_half(r, dp2)), (offs[0], offs[2]), pre,

@@ -144,14 +144,17 @@ def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
             if nb == 0 or not r > 0.0:
                 continue
             nbad += _samples(sa, lp, grids[hh], mtab, prm, gv, h, (beams, bstate, nb), (obeams, obstate, o_ok),
-                             (fx, fy, w, hgt), r, scr, stack, out, hh, y, x)
+                             (fx, fy, x, y, w, hgt), r, scr, stack, out, hh, y, x)
     return nbad
 
 
 @inlined
-def _offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs, y, x):
-    """The four neighbours' offset camera paths of a camera sample (step 2 of the module docstring)."""
-    fx, fy, w, hgt = film
+def offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs):
+    """The four neighbours' offset camera paths of a camera sample (step 2 of the module docstring;
+    G-BRE's camera pass too): ``film`` = (fx, fy, x, y, width, height), ``offs`` = (obeams,
+    obstate, o_ok), filled. Callers trace them at the sample's first photon: they depend on the
+    sample's random numbers alone, so the buffers are those of tracing them first."""
+    fx, fy, x, y, w, hgt = film
     obeams, obstate, o_ok = offs
     for k in range(4):
         o_ok[k] = _offset_path(sa, prm, h, fx, fy, x + SHIFT_DX[k], y + SHIFT_DY[k], w, hgt, k, stack, beams, bstate,
@@ -220,10 +223,9 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
 @block
 def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, out, hh, y, x):
     """VPM's K distance samples of one camera path, their photons and the photons' shifts. The
-    offset camera paths and gather points are made only when a distance sample finds a photon (at
-    gvpm's small kernel most find none: on the spot light and the volume caustic 69-74 % of the
-    pixels found none with either of their two camera samples); they depend on the camera sample's random numbers alone, so the buffers are
-    those of making them first."""
+    offset camera paths and gather points are made only when a distance sample finds a photon:
+    at gvpm's small kernel most find none (on the spot light and the volume caustic, 69-74 % of
+    the pixels found none with either of their two camera samples)."""
     beams, bstate, nb = base
     og = scr.og
     K = gv.samples
@@ -253,7 +255,7 @@ def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, ou
         if n == 0:
             continue                  # no photon to shift: D_k, S_k and the counts would not change
         if not traced:
-            _offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs, y, x)
+            offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs)
             traced = True
         _offset_gather((offs[0], offs[2]), nb, b, t, sbar, pb, pdf, tr, k0, og)
         for j in range(4):

@@ -53,17 +53,17 @@ from gdlearn.integrators.photon.gather import GatherOut, GatherParams, gather_ro
 FOOTPRINT_SAMPLE = 1 << 40
 #: light-path length bound when max_depth is unbounded (Russian roulette ends paths long before)
 MAX_LIGHT_VERTICES = 64
+#: how sppm / ppm estimate the direct light (SurfacePhotonMapper)
+DIRECT = ("photons", "nee")
+#: the photon subsets by parent vertex (GatherParams.parents is the index): every photon, specular parents, the rest
+PARENTS = ("any", "specular", "non-specular")
+_PHOTON_CLASSES = (DIRECT_LIGHTING, DIFFUSE_INTERREFLECTION, GLOSSY, SPECULAR, CAUSTICS)
 
 
 def path_bound(setup) -> int:
     """The longest path (Mitsuba's max_depth, in segments) a photon estimator traces: the scene's,
     or MAX_LIGHT_VERTICES + 1 when it is unbounded (-1)."""
     return setup.max_depth if setup.max_depth < UNBOUNDED else MAX_LIGHT_VERTICES + 1
-#: how sppm / ppm estimate the direct light (SurfacePhotonMapper)
-DIRECT = ("photons", "nee")
-#: the photon subsets by parent vertex (GatherParams.parents is the index): every photon, specular parents, the rest
-PARENTS = ("any", "specular", "non-specular")
-_PHOTON_CLASSES = (DIRECT_LIGHTING, DIFFUSE_INTERREFLECTION, GLOSSY, SPECULAR, CAUSTICS)
 
 
 def accumulate_density(D, phi, r2):
