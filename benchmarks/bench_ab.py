@@ -47,13 +47,17 @@ print(json.dumps({"compile": c, "compile_cpu": c_cpu, "pass": ts[len(ts) // 2], 
 
 
 def run(tree: Path, args, scene: str, integ: str, cold: bool) -> dict:
+    tree = tree.resolve()
     env = dict(os.environ, PYTHONPATH=str(tree))
     with tempfile.TemporaryDirectory() as cache:
         if cold:
             env["GDLEARN_CACHE"] = cache
             env.pop("NUMBA_CACHE_DIR", None)
+        # cwd = the tree: ``python -c`` puts the working directory ahead of PYTHONPATH on sys.path, so
+        # run from a checkout, both sides would import that checkout's gdlearn
         out = subprocess.run([sys.executable, "-c", CHILD, str(tree / "scenes" / f"{scene}.xml"), integ, str(args.res),
-                              str(args.spp), str(args.passes)], env=env, capture_output=True, text=True, check=True)
+                              str(args.spp), str(args.passes)], env=env, capture_output=True, text=True, check=True,
+                             cwd=str(tree))
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
