@@ -325,20 +325,60 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
 
 
 @block
-def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
+def endpoint_sensitivity(x0, X, xe, ne, shapes, etas, refract, targets, k, A, S):
     """``(|det dx_1/dx_e|, ok)`` with x0 fixed: the generalised-geometry ratio of GPM Eq. 8,
-    G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints."""
+    G(x_0 .. x_e) / G(x_0, x_1), from the implicit function theorem on the constraints,
+    C(X(x_e), x_e) = 0 => dX/dx_e = -A^-1 B. Leaves S = A^-1 B (2k x 2, chart coordinates of the
+    chain per chart coordinate of x_e in the plane of normal ne), which :func:`predicted_start`
+    takes; A (2k x 2k) is scratch."""
     m = 2 * k
-    A = np.empty((m, m))
-    B = np.empty((m, 2))
-    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
+    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, S):
         return 0.0, False
-    if not solve_linear(A, B, m, 2):
+    if not solve_linear(A, S, m, 2):
         return 0.0, False
-    d = abs(B[0, 0] * B[1, 1] - B[0, 1] * B[1, 0])     # the sign of -A^-1 B does not matter
+    d = abs(S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0])     # the sign of -A^-1 B does not matter
     if not (d > 0.0 and math.isfinite(d)):
         return 0.0, False
     return d, True
+
+
+@block
+def chain_endpoint_det(x0, X, xe, ne, shapes, etas, refract, targets, k):
+    """:func:`endpoint_sensitivity`'s determinant alone."""
+    m = 2 * k
+    return endpoint_sensitivity(x0, X, xe, ne, shapes, etas, refract, targets, k, np.empty((m, m)),
+                                np.empty((m, 2)))
+
+
+@block
+def predicted_start(X, xe, ne, xe_new, S, shapes, k, Xp):
+    """Xp <- the chain joining x0 to ``xe_new`` to first order: X moved in its charts by
+    dX = -S (e . s, e . t), e = xe_new - xe, (s, t) the chart of x_e (normal ne) and S = A^-1 B of
+    :func:`endpoint_sensitivity` at X. Started there, a walk's error is O(``|e|^2``) instead of
+    O(``|e|``): Newton's quadratic convergence then skips about one step (benchmarks/README.md,
+    "A walk that starts where the chain will be")."""
+    s, t = vec.coordinate_system(ne)
+    e = vec.sub(xe_new, xe)
+    u, v = vec.dot(e, s), vec.dot(e, t)
+    for j in range(k):
+        p = shape_chart(shapes, j, _v3(X, j, 0), -(S[2 * j, 0] * u + S[2 * j, 1] * v),
+                        -(S[2 * j + 1, 0] * u + S[2 * j + 1, 1] * v))
+        Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
+
+
+@block
+def predicted_walk(x0, X, xe, ne, xe_new, S, shapes, etas, refract, targets, k, Xo):
+    """Xo <- the chain X walked to join x0 and ``xe_new``, started at :func:`predicted_start` -- or
+    at X itself where the prediction leaves a finite surface (or another event's side). A
+    deterministic function of the base chain and the new endpoint, as a shift must be. Returns
+    :func:`manifold_walk`'s ``(ok, iterations, residual)``."""
+    predicted_start(X, xe, ne, xe_new, S, shapes, k, Xo)
+    ok, it, r = manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL)
+    if ok or it > 0 or r < math.inf:
+        return ok, it, r
+    for j in range(k):                      # the predicted start is invalid: the plain walk
+        Xo[j, 0], Xo[j, 1], Xo[j, 2] = X[j, 0], X[j, 1], X[j, 2]
+    return manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL)
 
 
 @block

@@ -75,7 +75,8 @@ from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED
     GvpmOut, offset_paths
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
     store_edge
-from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
+from gdlearn.integrators.photon.photon_manifold import CHAIN_UNKNOWN, VolumeChain, complete_volume_photon, \
+    new_volume_chain
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.volume_photon import NULL, REFLECTED, TRANSLATED, camera_distance_copy, chord_half, \
@@ -97,6 +98,7 @@ class Scratch(NamedTuple):
     cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts null / mixed / reconnected / failed / manifold
     edge: np.ndarray      # (1, EDGE_COLS): the current photon's recorded edge a -> b, walked at most once
     traced: np.ndarray    # (1,) bool: the camera sample's offset camera paths are traced (offset_paths)
+    chain: VolumeChain    # the current photon's specular chain, built once for its four neighbours
 
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -199,7 +201,8 @@ def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
             np.empty((MAX_BEAMS, 2), dtype=np.int64), np.empty((4, MAX_BEAMS, BEAM_COLS)),
             np.empty((4, MAX_BEAMS, 2), dtype=np.int64), np.zeros(4, dtype=np.bool_))
     scr = Scratch(np.empty(nmax, dtype=np.int64), np.empty(3), np.empty(3), np.empty((9, 3)),
-                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)), np.zeros(1, dtype=np.bool_))
+                  np.empty(N_COUNTS, dtype=np.int64), np.empty((1, EDGE_COLS)), np.zeros(1, dtype=np.bool_),
+                  new_volume_chain())
     return _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr)
 
 
@@ -212,8 +215,11 @@ def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, s
     nbad = 0
     stack, beams, bstate = borrow(work[0]), borrow(work[1]), borrow(work[2])
     obeams, obstate, o_ok = borrow(work[3]), borrow(work[4]), borrow(work[5])
+    ch = scr.chain
     scr = Scratch(borrow(scr.buf), borrow(scr.oa), borrow(scr.da), borrow(scr.acc), borrow(scr.cnt),
-                  borrow(scr.edge), borrow(scr.traced))
+                  borrow(scr.edge), borrow(scr.traced),
+                  VolumeChain(borrow(ch.state), borrow(ch.rows), borrow(ch.X), borrow(ch.shapes), borrow(ch.etas),
+                              borrow(ch.refr), borrow(ch.targets), borrow(ch.S), borrow(ch.A), borrow(ch.det)))
     for x in range(w):
         par = (x + y) & 1 if gp.subsets else 0
         for hh in range(2):
@@ -316,7 +322,8 @@ def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack):
         return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]), False
     if scr.edge[0, 0] == EDGE_UNKNOWN:
         store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
-    status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, stack)
+    status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, scr.chain,
+                                                          stack)
     return status == OK, f3, rl, w_in, walked
 
 
@@ -330,6 +337,7 @@ def _shift_photon(sa, lp, mtab, v, gp, g, q, offs, pre, c_b, scr, stack):
     obeams, o_ok = offs
     acc, cnt = scr.acc, scr.cnt
     scr.edge[0, 0] = EDGE_UNKNOWN
+    scr.chain.state[0] = CHAIN_UNKNOWN
     nbad = 0
     for j in range(4):
         ok = o_ok[j]

@@ -39,6 +39,7 @@ meets a surface before b' (:func:`gdlearn.integrators.photon.gvpm_light.edge_wal
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -94,13 +95,9 @@ def _delta_value(mat, ns, w_in, w_out_world, refl):
 
 
 @block
-def load_chain(sa, lp, mtab, v, rows, k):
+def load_chain_into(sa, lp, mtab, v, rows, k, X, shapes, etas, refr):
     """The chain from y_b's side, X[0] = y_{b+1} .. X[k-1] = y_{s-1}, with each vertex's shape row,
-    relative index and event (True: a refraction) as the base path took it."""
-    X = np.empty((k, 3))
-    shapes = np.empty((k, M.SH_WIDTH))
-    etas = np.empty(k)
-    refr = np.empty(k, dtype=np.bool_)
+    relative index and event (True: a refraction) as the base path took it, into the first k rows."""
     for j in range(k):
         row = rows[k - 1 - j]
         child = v if j == k - 1 else rows[k - 2 - j]
@@ -112,41 +109,68 @@ def load_chain(sa, lp, mtab, v, rows, k):
         din = (lp.d_in[row, 0], lp.d_in[row, 1], lp.d_in[row, 2])
         dout = (lp.d_in[child, 0], lp.d_in[child, 1], lp.d_in[child, 2])
         refr[j] = dot(din, n_row) * dot(dout, n_row) > 0.0      # travel keeps its side: it crossed
+
+
+@block
+def load_chain(sa, lp, mtab, v, rows, k):
+    """:func:`load_chain_into` new arrays of k rows: (X, shapes, etas, refr)."""
+    X = np.empty((k, 3))
+    shapes = np.empty((k, M.SH_WIDTH))
+    etas = np.empty(k)
+    refr = np.empty(k, dtype=np.bool_)
+    load_chain_into(sa, lp, mtab, v, rows, k, X, shapes, etas, refr)
     return X, shapes, etas, refr
 
 
 @block
-def walk_both_ways(yb, X, ys, ye, shapes, etas, refr, k):
-    """Walk the base chain X (y_b .. y_s) to the offset endpoint ye and back: the walk back must
-    find the base chain again (the shift is invertible). Returns (ok, offset chain X', the base's
-    half-vector targets, which Eq. 8's determinants take)."""
-    targets = np.empty((k, 2))
-    Xo = X.copy()
+def base_sensitivity(yb, X, ys, ns, shapes, etas, refr, k, targets, A, S):
+    """The base chain's half-vector targets (into ``targets``), S = A^-1 B (``S``; A scratch) and
+    Eq. 8's ``|dy_{b+1}/dy_s|``, y_s moving in the chart of normal ns: (ok, det_b). The sensitivity
+    that predicts a walk's start (``gdlearn.shifts.manifold.predicted_walk``) is the one Eq. 8 takes."""
     if not M.half_vector_targets(yb, X, ys, shapes, etas, refr, k, targets):
-        return False, Xo, targets
-    ok, _, _ = M.manifold_walk(yb, ye, Xo, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+        return False, 0.0
+    det_b, ok = M.endpoint_sensitivity(yb, X, ys, ns, shapes, etas, refr, targets, k, A, S)
+    return ok, det_b
+
+
+@block
+def walk_forward(yb, X, ys, ns, ye, shapes, etas, refr, k):
+    """Walk the base chain X (y_b .. y_s, y_s moving in the chart of normal ns) to the offset
+    endpoint ye, from the first-order predicted chain (``gdlearn.shifts.manifold.predicted_walk``).
+    Returns (ok, offset chain X', the base's half-vector targets, Eq. 8's ``|dy_{b+1}/dy_s|`` of
+    the base chain)."""
+    m = 2 * k
+    targets = np.empty((k, 2))
+    S = np.empty((m, 2))
+    Xo = X.copy()
+    ok, det_b = base_sensitivity(yb, X, ys, ns, shapes, etas, refr, k, targets, np.empty((m, m)), S)
     if not ok:
-        return False, Xo, targets
-    Xb = Xo.copy()
-    ok, _, _ = M.manifold_walk(yb, ys, Xb, shapes, etas, refr, targets, k, M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+        return False, Xo, targets, 0.0
+    ok, _, _ = M.predicted_walk(yb, X, ys, ns, ye, S, shapes, etas, refr, targets, k, Xo)
+    return ok, Xo, targets, det_b
+
+
+@block
+def walks_back(yb, X, ys, Xo, ye, ne, shapes, etas, refr, targets, k):
+    """The offset chain Xo (endpoint ye in the chart of normal ne) walked back to y_s as the reverse
+    shift would walk it -- from its own predicted start -- must find the base chain X again (near a
+    caustic several chains join the same endpoints: the shift would not be invertible). Returns
+    (ok, Eq. 8's ``|dy'_{b+1}/dy'_s|`` of the offset chain)."""
+    m = 2 * k
+    S = np.empty((m, 2))
+    det_o, ok = M.endpoint_sensitivity(yb, Xo, ye, ne, shapes, etas, refr, targets, k, np.empty((m, m)), S)
     if not ok:
-        return False, Xo, targets
+        return False, 0.0
+    Xb = np.empty((k, 3))
+    ok, _, _ = M.predicted_walk(yb, Xo, ye, ne, ys, S, shapes, etas, refr, targets, k, Xb)
+    if not ok:
+        return False, 0.0
     tol = 1e-7 * M.chain_length_scale(yb, X, ys, k)
     for j in range(k):
         for c in range(3):
             if not abs(Xb[j, c] - X[j, c]) <= tol:
-                return False, Xo, targets
-    return True, Xo, targets
-
-
-@block
-def endpoint_dets(yb, X, ys, ns, Xo, ye, ne, shapes, etas, refr, targets, k):
-    """(ok, det_b, det_o): Eq. 8's ``|dy_{b+1}/dy_s|`` of the base chain and of the offset chain, each
-    endpoint moving in its chart (normal ns, ne: a surface's normal, or a volume photon's last
-    segment)."""
-    det_b, ok_b = M.chain_endpoint_det(yb, X, ys, ns, shapes, etas, refr, targets, k)
-    det_o, ok_o = M.chain_endpoint_det(yb, Xo, ye, ne, shapes, etas, refr, targets, k)
-    return ok_b and ok_o, det_b, det_o
+                return False, 0.0
+    return True, det_o
 
 
 @block
@@ -236,10 +260,10 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     j6 = projection_jacobian(yq, ystar, nstar, yh, ngh)
     X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
     yb = yb_of(lp, b)
-    ok, Xo, targets = walk_both_ways(yb, X, ys, yh, shapes, etas, refr, k)
+    ok, Xo, targets, det_b = walk_forward(yb, X, ys, ns_v, yh, shapes, etas, refr, k)
     if not ok:
         return False, _ZERO, 0.0, _ZERO
-    ok, det_b, det_o = endpoint_dets(yb, X, ys, ns_v, Xo, yh, ngh, shapes, etas, refr, targets, k)
+    ok, det_o = walks_back(yb, X, ys, Xo, yh, ngh, shapes, etas, refr, targets, k)
     if not (ok and j6 > 0.0):
         return False, _ZERO, 0.0, _ZERO
     j_area = det_o * j6 / det_b                     # Eq. 7: |dy'_{b+1} / dy_{b+1}|
@@ -264,34 +288,81 @@ def _in_vacuum(lp, rows, k):
     return True
 
 
+class VolumeChain(NamedTuple):
+    """A volume photon's specular chain and what its shifts share (:func:`volume_chain`): built once
+    per photon, walked for each neighbour (:func:`shift_volume_chain`). Arrays of MAX_CHAIN rows,
+    the first k used; allocated once per camera-pass row (:func:`new_volume_chain`)."""
+    state: np.ndarray     # (3,) int64: CHAIN_UNKNOWN / CHAIN_OK / CHAIN_FAIL, k, the row of y_b
+    rows: np.ndarray      # (MAX_CHAIN,) int64: chain_rows' rows, y_{s-1} first
+    X: np.ndarray         # (MAX_CHAIN, 3): the chain from y_b's side
+    shapes: np.ndarray    # (MAX_CHAIN, SH_WIDTH)
+    etas: np.ndarray      # (MAX_CHAIN,)
+    refr: np.ndarray      # (MAX_CHAIN,) bool
+    targets: np.ndarray   # (MAX_CHAIN, 2): the base's half-vector components
+    S: np.ndarray         # (2 MAX_CHAIN, 2): A^-1 B at the base chain (shifts.manifold.endpoint_sensitivity)
+    A: np.ndarray         # (2 MAX_CHAIN, 2 MAX_CHAIN): scratch
+    det: np.ndarray       # (1,): Eq. 8's |dy_{b+1}/dy_s| of the base chain
+
+
+#: VolumeChain.state[0]
+CHAIN_UNKNOWN, CHAIN_OK, CHAIN_FAIL = 0, 1, 2
+
+
 @block
-def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
-    """Shift the volume photon row v, whose parent a = y_{s-1} (``edge``: its recorded edge a -> b,
-    :func:`gdlearn.integrators.photon.gvpm_light.base_edge`) lies on a specular chain, to ``b_off``
-    (module docstring). Returns what gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per
-    channel, light-side density ratio p(b') / p(b), the direction b' is reached along)."""
-    st, q, child, n_null, tau_b, logp_b = edge
+def new_volume_chain():
+    m = 2 * MAX_CHAIN
+    return VolumeChain(np.zeros(3, dtype=np.int64), np.empty(MAX_CHAIN, dtype=np.int64), np.empty((MAX_CHAIN, 3)),
+                       np.empty((MAX_CHAIN, M.SH_WIDTH)), np.empty(MAX_CHAIN), np.empty(MAX_CHAIN, dtype=np.bool_),
+                       np.empty((MAX_CHAIN, 2)), np.empty((m, 2)), np.empty((m, m)), np.empty(1))
+
+
+@block
+def volume_chain(sa, lp, mtab, v, edge, ch):
+    """Fill ``ch`` for volume photon row v whose recorded edge a -> b is ``edge``
+    (:func:`gdlearn.integrators.photon.gvpm_light.base_edge`): its chain (:func:`chain_rows`; in
+    vacuum), targets, sensitivity and determinant, the endpoint's chart across its last segment
+    (module docstring). ch.state[0] says whether it can be walked."""
+    ch.state[0] = CHAIN_FAIL
+    st, q = edge[0], edge[1]
     if st != OK:                 # the recorded edge itself could not be walked: no densities to compare
-        return FAIL, _ZERO, 0.0, _ZERO
-    rows = np.empty(MAX_CHAIN, dtype=np.int64)
-    k, b = chain_rows(sa, lp, mtab, q, rows)
-    if k == 0 or not _in_vacuum(lp, rows, k):
-        return FAIL, _ZERO, 0.0, _ZERO
+        return
+    k, b = chain_rows(sa, lp, mtab, q, ch.rows)
+    if k == 0 or not _in_vacuum(lp, ch.rows, k):
+        return
+    load_chain_into(sa, lp, mtab, v, ch.rows, k, ch.X, ch.shapes, ch.etas, ch.refr)
     ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
-    yq = (lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2])
-    X, shapes, etas, refr = load_chain(sa, lp, mtab, v, rows, k)
+    w_b, _ = _dir((lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2]), ys)
+    ok, det_b = base_sensitivity(yb_of(lp, b), ch.X, ys, w_b, ch.shapes, ch.etas, ch.refr, k, ch.targets, ch.A, ch.S)
+    if ok:
+        ch.state[0], ch.state[1], ch.state[2] = CHAIN_OK, k, b
+        ch.det[0] = det_b
+
+
+@block
+def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
+    """Shift the volume photon row v, whose parent a = y_{s-1} lies on the specular chain ``ch``
+    (:func:`volume_chain`, state CHAIN_OK), to ``b_off`` (module docstring). Returns what
+    gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per channel, light-side density ratio
+    p(b') / p(b), the direction b' is reached along)."""
+    _, q, child, n_null, tau_b, logp_b = edge
+    k, b = ch.state[1], ch.state[2]
+    X, shapes, etas, refr, targets = ch.X, ch.shapes, ch.etas, ch.refr, ch.targets
+    ys = (lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2])
+    w_b, _ = _dir((lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2]), ys)
     yb = yb_of(lp, b)
-    ok, Xo, targets = walk_both_ways(yb, X, ys, b_off, shapes, etas, refr, k)
+    Xo = np.empty((k, 3))
+    ok, _, _ = M.predicted_walk(yb, X, ys, w_b, b_off, ch.S, shapes, etas, refr, targets, k, Xo)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     # each endpoint's chart lies across its own last segment (module docstring)
-    w_b, _ = _dir(yq, ys)
     a_o = (Xo[k - 1, 0], Xo[k - 1, 1], Xo[k - 1, 2])
     w_o, l_o = _dir(a_o, b_off)
-    ok, det_b, det_o = endpoint_dets(yb, X, ys, w_b, Xo, b_off, w_o, shapes, etas, refr, targets, k)
-    if not (ok and l_o > 0.0):
+    if not l_o > 0.0:
         return FAIL, _ZERO, 0.0, _ZERO
-    ok, nrm_o = offset_chain_normals(sa, lp, mtab, rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
+    ok, det_o = walks_back(yb, X, ys, Xo, b_off, w_o, shapes, etas, refr, targets, k)
+    if not ok:
+        return FAIL, _ZERO, 0.0, _ZERO
+    ok, nrm_o = offset_chain_normals(sa, lp, mtab, ch.rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
                                      stack)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
@@ -301,7 +372,7 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
                                               stack)
     if not (ok and n_o == n_null and med_o == lp.medium[v]):
         return FAIL, _ZERO, 0.0, _ZERO
-    ok, f3, pp, w_in = chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, b_off, nrm_o, refr, det_o / det_b)
+    ok, f3, pp, w_in = chain_ratios(sa, lp, ch.rows, k, b, yb, X, Xo, ys, b_off, nrm_o, refr, det_o / ch.det[0])
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     # T(a', b') / T(a, b) per channel and the tracer's collision densities, as gvpm_light.reconnect_edge
@@ -310,15 +381,33 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
     return OK, f3, pp * math.exp(logp_o - logp_b), w_in
 
 
+@block
+def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
+    """Shift the volume photon row v, whose parent a = y_{s-1} (``edge``: its recorded edge a -> b,
+    :func:`gdlearn.integrators.photon.gvpm_light.base_edge`) lies on a specular chain, to ``b_off``:
+    :func:`volume_chain` then :func:`shift_volume_chain` (a camera pass with several neighbours per
+    photon builds the chain once)."""
+    ch = new_volume_chain()
+    volume_chain(sa, lp, mtab, v, edge, ch)
+    if ch.state[0] != CHAIN_OK:
+        return FAIL, _ZERO, 0.0, _ZERO
+    return shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack)
+
+
 @inlined
-def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
+def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack):
     """The light subpath of volume photon row v moved to ``b_off`` (Gruson et al. 2018, Sec. 4.3):
     reconnected from its parent (:func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge`), or,
-    when the parent is specular, by :func:`manifold_volume_photon`. Returns reconnect_edge's tuple
-    and whether the walk completed it. Inlined: G-VPM's and G-BRE's camera passes call it per photon
-    and neighbour."""
+    when the parent is specular, by the manifold walk (:func:`shift_volume_chain`) of the chain
+    ``ch``, built at the first neighbour that needs it (the caller sets ch.state[0] to
+    CHAIN_UNKNOWN for each new photon). Returns reconnect_edge's tuple and whether the walk
+    completed it. Inlined: G-VPM's and G-BRE's camera passes call it per photon and neighbour."""
     status, f3, rl, w_in = reconnect_edge(sa, lp, v, b_off, stack, edge)
     if status != FAIL_SPECULAR:
         return status, f3, rl, w_in, False
-    status, f3, rl, w_in = manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack)
+    if ch.state[0] == CHAIN_UNKNOWN:
+        volume_chain(sa, lp, mtab, v, edge, ch)
+    if ch.state[0] != CHAIN_OK:
+        return FAIL, _ZERO, 0.0, _ZERO, True
+    status, f3, rl, w_in = shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack)
     return status, f3, rl, w_in, True
