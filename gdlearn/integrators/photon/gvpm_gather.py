@@ -31,11 +31,13 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
    densities (f(T x) ``|J|`` / p(x), ``|J|`` = 1).
 
 Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample's photons are
-collected once (row and base term, per-row scratch), then each neighbour runs over them with its
-D_k, S_k and counts in registers, summed in photon order -- the buffers are bit for bit those of
-one write per photon and shift (tests/test_gvpm_fast.py against tests/_gvpm_reference.py) --, and
-a photon's recorded edge a -> b is walked once for the four neighbours (``gvpm_light.base_edge``),
-and the offset camera paths are traced only for a camera sample whose distance samples find a photon.
+collected once (row and base term, per-row scratch), then shifted photon by photon to the four
+neighbours, D_k, S_k and counts summed in a row scratch in photon order -- the buffers are bit for
+bit those of one write per photon and shift (tests/test_gvpm_fast.py against
+tests/_gvpm_reference.py) --; a photon's recorded edge a -> b is walked once for the four
+neighbours (``gvpm_light.base_edge``), and so is the specular chain above it built once
+(``photon_manifold.volume_chain``); the offset camera paths are traced only for a camera sample
+whose distance samples find a photon.
 
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
@@ -65,7 +67,8 @@ from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED,
     beam_path
 from gdlearn.integrators.photon.gather import _borrow_grid
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, store_edge
-from gdlearn.integrators.photon.photon_manifold import complete_volume_photon
+from gdlearn.integrators.photon.photon_manifold import CHAIN_UNKNOWN, VolumeChain, complete_volume_photon, \
+    new_volume_chain
 from gdlearn.integrators.photon.volume_estimates import D_VOL, _admit, _pick_beam, beam_weight
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
 from gdlearn.shifts.replay import SHIFT_DX, SHIFT_DY
@@ -96,6 +99,9 @@ class Scratch(NamedTuple):
     rows: np.ndarray      # one distance sample's admitted photons (light-vertex rows; -1: dropped)
     cb: np.ndarray        # (n, 3): their base terms c_b
     edge: np.ndarray      # (n, EDGE_COLS): their recorded edges a -> b, computed once for all neighbours
+    acc: np.ndarray       # (8, 3): a distance sample's D_j (rows 0-3) and S_j (4-7), summed in photon order
+    cnt: np.ndarray       # (4, N_COUNTS) int64: its shift counts per neighbour
+    chain: VolumeChain    # the current photon's specular chain, built once for its four neighbours
 
 
 def allocate(h: int, w: int) -> GvpmOut:
@@ -132,7 +138,8 @@ def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
     # per-row scratch, allocated once (not per sample): the grid's candidates, then one distance
     # sample's admitted photons (row, base term) and their recorded edges (gvpm_light.base_edge)
     scr = Scratch(np.empty(nbuf, dtype=np.int64), np.empty((4, 12)), np.empty(nbuf, dtype=np.int64),
-                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)))
+                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)), np.empty((8, 3)),
+                  np.empty((4, N_COUNTS), dtype=np.int64), new_volume_chain())
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -258,8 +265,7 @@ def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, ou
             offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs)
             traced = True
         _offset_gather((offs[0], offs[2]), nb, b, t, sbar, pb, pdf, tr, k0, og)
-        for j in range(4):
-            nbad += _neighbour(sa, lp, mtab, scr, n, dg, g, r, gv.mixed, og, j, stack, out, hh, y, x)
+        nbad += _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv.mixed, og, stack, out, hh, y, x)
     out.m[hh, y, x] = cnt
     return nbad
 
@@ -305,75 +311,84 @@ def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
 
 
 @inlined
-def _neighbour(sa, lp, mtab, scr, n, dg, g, r, mixed, og, j, stack, out, hh, y, x):
-    """The photons of one distance sample (scratch rows 0..n) shifted to neighbour j's gather point
-    og[j]: D_j, S_j and the shift counts summed in registers in photon order, written once. Inlined:
-    a call passing the scene and the light records costs more than a null shift (~0.7 us measured for
-    gvpm_light.reconnect as a call against inlined, on the spot medium)."""
-    d0, d1, d2 = out.phi[hh, 1 + j, y, x, 0], out.phi[hh, 1 + j, y, x, 1], out.phi[hh, 1 + j, y, x, 2]
-    s0, s1, s2 = out.phi[hh, 5 + j, y, x, 0], out.phi[hh, 5 + j, y, x, 1], out.phi[hh, 5 + j, y, x, 2]
-    n_null = 0
-    n_mixed = 0
-    n_rec = 0
-    n_fail = 0
-    n_walk = 0
+def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y, x):
+    """The photons of one distance sample (scratch rows 0..n) shifted to the four neighbours' gather
+    points og[j], photon by photon: a photon's recorded edge and specular chain are built once for
+    its four shifts. D_j, S_j and the shift counts are summed in the row scratch (scr.acc, scr.cnt)
+    in photon order -- each buffer element sees the same additions in the same order as one write
+    per term -- and written once. Inlined: a call passing the scene and the light records costs
+    more than a null shift (~0.7 us measured for gvpm_light.reconnect as a call against inlined,
+    on the spot medium)."""
+    acc, cnt = scr.acc, scr.cnt
+    for j in range(4):
+        for c in range(3):
+            acc[j, c] = out.phi[hh, 1 + j, y, x, c]
+            acc[4 + j, c] = out.phi[hh, 5 + j, y, x, c]
+        for q in range(N_COUNTS):
+            cnt[j, q] = 0
     nbad = 0
-    cam = og[j, 0] > 0.0
-    dp = (og[j, 1], og[j, 2], og[j, 3])
     for i in range(n):
         v = scr.rows[i]
         if v < 0:
             continue
-        c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
-        c_o = (0.0, 0.0, 0.0)
-        ratio = 0.0
-        ok = cam
-        kind = NULL
-        walked = False
+        scr.chain.state[0] = CHAIN_UNKNOWN
+        for j in range(4):
+            nbad += _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack)
+    for j in range(4):
+        for c in range(3):
+            out.phi[hh, 1 + j, y, x, c] = acc[j, c]
+            out.phi[hh, 5 + j, y, x, c] = acc[4 + j, c]
+        for q in range(N_COUNTS):
+            out.count[hh, q, y, x] += cnt[j, q]
+    return nbad
+
+
+@inlined
+def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack):
+    """Photon v (scratch row i, base term scr.cb[i]) shifted to neighbour j's gather point og[j]:
+    its terms added to D_j, S_j (scr.acc rows j, 4 + j) and its outcome to scr.cnt[j]. Returns
+    the non-finite terms dropped (counted, never written)."""
+    acc, cnt = scr.acc, scr.cnt
+    c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
+    c_o = (0.0, 0.0, 0.0)
+    ratio = 0.0
+    ok = og[j, 0] > 0.0
+    kind = NULL
+    walked = False
+    nbad = 0
+    if ok:
+        dp = (og[j, 1], og[j, 2], og[j, 3])
+        b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
+        f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
+        if kind != NULL:
+            if scr.edge[i, 0] == EDGE_UNKNOWN:
+                store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
+            status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
+                                                                  scr.chain, stack)
+            ok = status == OK
         if ok:
-            b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
-            f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
-            if kind != NULL:
-                if scr.edge[i, 0] == EDGE_UNKNOWN:
-                    store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
-                status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
-                                                                      stack)
-                ok = status == OK
-            if ok:
-                ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
-                c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
-                       og[j, 9] * ph * lp.beta[v, 2] * f3[2])
-                ratio = og[j, 10] * rl
-                if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
-                    nbad += 1                                  # counted, never written
-                    ok = False
-                elif not ratio > 0.0:
-                    ok = False
-        if not ok:
-            n_fail += 1
-            d0 += -1.0 * c_b[0]                                # w = 1, no offset (PHOTONS.md Sec. 0.2)
-            d1 += -1.0 * c_b[1]
-            d2 += -1.0 * c_b[2]
-            continue
-        if kind == NULL:
-            n_null += 1
-            wgt = og[j, 11]                                    # a null shift's: the camera side's
-        else:
-            n_rec += not walked
-            n_walk += walked
-            n_mixed += kind == REFLECTED
-            wgt = mis_weight_from_log_ratio(math.log(ratio))   # Eq. 19, balance heuristic
-        d0 += wgt * (c_o[0] - c_b[0])
-        d1 += wgt * (c_o[1] - c_b[1])
-        d2 += wgt * (c_o[2] - c_b[2])
-        s0 += wgt * c_o[0]
-        s1 += wgt * c_o[1]
-        s2 += wgt * c_o[2]
-    out.phi[hh, 1 + j, y, x, 0], out.phi[hh, 1 + j, y, x, 1], out.phi[hh, 1 + j, y, x, 2] = d0, d1, d2
-    out.phi[hh, 5 + j, y, x, 0], out.phi[hh, 5 + j, y, x, 1], out.phi[hh, 5 + j, y, x, 2] = s0, s1, s2
-    out.count[hh, C_NULL, y, x] += n_null
-    out.count[hh, C_MIXED, y, x] += n_mixed
-    out.count[hh, C_RECONNECTED, y, x] += n_rec
-    out.count[hh, C_FAILED, y, x] += n_fail
-    out.count[hh, C_MANIFOLD, y, x] += n_walk
+            ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])
+            c_o = (og[j, 7] * ph * lp.beta[v, 0] * f3[0], og[j, 8] * ph * lp.beta[v, 1] * f3[1],
+                   og[j, 9] * ph * lp.beta[v, 2] * f3[2])
+            ratio = og[j, 10] * rl
+            if not (_finite(c_o[0], c_o[1], c_o[2]) and math.isfinite(ratio)):
+                nbad += 1                                      # counted, never written
+                ok = False
+            elif not ratio > 0.0:
+                ok = False
+    if not ok:
+        cnt[j, C_FAILED] += 1
+        for c in range(3):
+            acc[j, c] += -1.0 * c_b[c]                         # w = 1, no offset (PHOTONS.md Sec. 0.2)
+        return nbad
+    if kind == NULL:
+        cnt[j, C_NULL] += 1
+        wgt = og[j, 11]                                        # a null shift's: the camera side's
+    else:
+        cnt[j, C_MANIFOLD if walked else C_RECONNECTED] += 1
+        cnt[j, C_MIXED] += kind == REFLECTED
+        wgt = mis_weight_from_log_ratio(math.log(ratio))       # Eq. 19, balance heuristic
+    for c in range(3):
+        acc[j, c] += wgt * (c_o[c] - c_b[c])
+        acc[4 + j, c] += wgt * c_o[c]
     return nbad
