@@ -237,6 +237,7 @@ def methods(a, extra=()) -> dict:
              "gvpm+l2": Method("gvpm+l2", "gvpm", "l2", opts),
              "bre-3d": Method("bre-3d", "bre", None, opts + k3), "bre-2d": Method("bre-2d", "bre", None, opts + k2),
              "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
+             "gbre+l2": Method("gbre+l2", "gbre", "l2", opts + k3 + (("shift", "mixed"),)),
              "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
     for name in a.methods.split(","):
         base, _, scale = name.partition("@")       # "vpm@0.35": vpm from 0.35 x the default volume radius

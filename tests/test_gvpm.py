@@ -61,16 +61,17 @@ def test_base_estimate_is_vpm(fog):
 
 
 def test_first_volume_radius_is_a_fraction_of_vpms(fog):
-    """gvpm and gbre start from VOLUME_RADIUS_SCALE x VPM's (and the BRE's) default volume radius
-    (gvpm's module docstring: the gradients afford a smaller kernel); an explicit
+    """gvpm and gbre start from their own VOLUME_RADIUS_SCALE x VPM's (and the BRE's) default volume
+    radius (gvpm's and gbre's module docstrings: the gradients afford a smaller kernel); an explicit
     volume_radius_scale or volume_radius still wins."""
-    from gdlearn.integrators.photon.gvpm import VOLUME_RADIUS_SCALE
+    from gdlearn.integrators.photon import gbre, gvpm
 
     opts = dict(photons_per_pass=2000, transport="media")
     vpm = make("vpm", fog, **opts).initial_volume_radius()
-    assert VOLUME_RADIUS_SCALE < 1 and vpm > 0
-    for name in ("gvpm", "gbre"):
-        assert math.isclose(make(name, fog, **opts).initial_volume_radius(), VOLUME_RADIUS_SCALE * vpm, rel_tol=1e-12)
+    assert vpm > 0
+    for name, scale in (("gvpm", gvpm.VOLUME_RADIUS_SCALE), ("gbre", gbre.VOLUME_RADIUS_SCALE)):
+        assert 0 < scale < 1
+        assert math.isclose(make(name, fog, **opts).initial_volume_radius(), scale * vpm, rel_tol=1e-12)
         assert math.isclose(make(name, fog, volume_radius_scale=1.0, **opts).initial_volume_radius(), vpm,
                             rel_tol=1e-12)
         assert make(name, fog, volume_radius=0.05, **opts).initial_volume_radius() == 0.05

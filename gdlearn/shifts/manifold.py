@@ -10,12 +10,14 @@ components: c_j = (h_j . s, h_j . t) - o_j = 0, with o_j = 0 for a perfect mirro
 unknowns are the chain vertices moved on their surfaces in 2-D charts.
 
 Walk. Start from the base chain (the offset endpoint moved by ~a pixel: the base is an excellent
-initial guess); each iteration takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a
-surface, flips a reflection / refraction side or does not reduce |C| is rejected and halved
-(step halving), at most ``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after
-``max_iter`` iterations (default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and
-reports failure otherwise. An unreachable target (the solution is off a finite surface, needs total
-internal reflection, or is not found in the budget) is a failure flag, never an exception.
+initial guess) -- or, where the moving endpoint is x_e and the sensitivity A^-1 B is at hand (a
+photon's chain, :func:`predicted_walk`), from the chain's first-order prediction; each iteration
+takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a surface, flips a reflection /
+refraction side or does not reduce |C| is rejected and halved (step halving), at most
+``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after ``max_iter`` iterations
+(default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and reports failure otherwise.
+An unreachable target (the solution is off a finite surface, needs total internal reflection, or
+is not found in the budget) is a failure flag, never an exception.
 
 Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sampled from x_b); the
 offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|

@@ -37,6 +37,14 @@ pass stays an independent estimate); the emission and its gradients are ``emissi
 half (no subsets: they are a device of the beam gather). ``transport="media"``: the medium part
 alone, the paper's experiments (PHOTONS.md E15). Fixed global radii only: a photon's k-NN or
 variable radius is not defined at its shifted position.
+
+The first volume radius is ``VOLUME_RADIUS_SCALE`` (0.1) times the BRE's default (the median
+distance to the ``neighbors``-th nearest volume photon), half of G-VPM's
+(``gvpm.VOLUME_RADIUS_SCALE``, where the reasons are: the gradients remove noise, not the
+kernel's blur). Measured at equal time (128 x 128, 20 s, 3 seeds, 3D kernel, against unbiased
+references; benchmarks/README.md, "The walk's start and G-BRE's radius"): ``gbre+l1`` from 0.1 of
+the default had the lowest relMSE of 0.07, 0.1, 0.14 and 0.2 on the volume caustic, and beat 0.2 on
+the fog box and the spot light; the BRE's (3D) was lowest at 0.2 of 0.1-0.3 on all three.
 """
 from __future__ import annotations
 
@@ -51,13 +59,14 @@ from gdlearn.integrators.photon import gbre_gather as gb
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
-from gdlearn.integrators.photon.gvpm import VOLUME_RADIUS_SCALE
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
 from gdlearn.integrators.photon.volumetric import BRE
 from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
+#: the first volume radius of gbre, x the BRE's default (module docstring)
+VOLUME_RADIUS_SCALE = 0.1
 COUNTS = ("null", "mixed", "reconnected", "failed", "manifold")     # gvpm_gather.C_*
 
 
@@ -78,10 +87,9 @@ def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
 class GBRE(BRE):
     """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, seed=0,
     photons_per_pass=100000, alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None,
-    volume_radius_scale=0.2, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
+    volume_radius_scale=0.1, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
     docstring; ``radius``: the surface part's initial radius, transport="all" only); ``shift`` None is "mixed" for
-    the 3D kernel and the ray-frame copy ("simple") for the 2D one. The first volume radius is G-VPM's,
-    ``gvpm.VOLUME_RADIUS_SCALE`` x the BRE's default (there the reasons and the measurements)."""
+    the 3D kernel and the ray-frame copy ("simple") for the 2D one."""
 
     name = "gbre"
 

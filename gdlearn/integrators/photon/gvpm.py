@@ -66,7 +66,7 @@ from gdlearn.integrators.photon.volumetric import VPM, reduce_radius3
 from gdlearn.photons import grid as hashgrid
 
 SHIFTS = ("mixed", "simple")
-#: the first volume radius of gvpm and gbre, x VPM's default (module docstring)
+#: the first volume radius of gvpm, x VPM's default (module docstring; gbre has its own)
 VOLUME_RADIUS_SCALE = 0.2
 #: the medium part's shift counts (gvpm_gather.C_*)
 _MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed", "manifold")
