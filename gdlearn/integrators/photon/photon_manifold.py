@@ -310,6 +310,7 @@ CHAIN_UNKNOWN, CHAIN_OK, CHAIN_FAIL = 0, 1, 2
 
 @block
 def new_volume_chain():
+    """An empty :class:`VolumeChain` (state CHAIN_UNKNOWN), its arrays sized for MAX_CHAIN vertices."""
     m = 2 * MAX_CHAIN
     return VolumeChain(np.zeros(3, dtype=np.int64), np.empty(MAX_CHAIN, dtype=np.int64), np.empty((MAX_CHAIN, 3)),
                        np.empty((MAX_CHAIN, M.SH_WIDTH)), np.empty(MAX_CHAIN), np.empty(MAX_CHAIN, dtype=np.bool_),
