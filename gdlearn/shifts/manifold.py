@@ -404,12 +404,17 @@ def _walks_back(x_b, X_base, x_c, Xo, shapes, etas, refract, targets, k, max_ite
     Xb = Xo.copy()
     ok, _, _ = manifold_walk(x_b, x_c, Xb, shapes, etas, refract, targets, k, max_iter,
                              MAX_HALVINGS, TOL)
-    if not ok:
-        return False
-    tol = 1e-7 * chain_length_scale(x_b, X_base, x_c, k)
+    return ok and same_chain(x_b, X_base, x_c, Xb, k)
+
+
+@block
+def same_chain(x0, X, xe, Y, k):
+    """Is the chain Y the chain X (x0 .. xe) to 1e-7 of its length scale? (A walk back that finds
+    another chain joining the same endpoints: the shift is not invertible there.)"""
+    tol = 1e-7 * chain_length_scale(x0, X, xe, k)
     for j in range(k):
         for c in range(3):
-            if not abs(Xb[j, c] - X_base[j, c]) <= tol:
+            if not abs(Y[j, c] - X[j, c]) <= tol:
                 return False
     return True
 

@@ -71,16 +71,15 @@ from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
     beam_path
 from gdlearn.integrators.photon.photon_shift_loop import finite3
-from gdlearn.integrators.photon.gvpm_gather import C_FAILED, C_MANIFOLD, C_MIXED, C_NULL, C_RECONNECTED, N_COUNTS, \
-    GvpmOut, offset_paths
+from gdlearn.integrators.photon.gvpm_gather import N_COUNTS, GvpmOut, add_shift, offset_paths
 from gdlearn.integrators.photon.gvpm_light import EDGE_COLS, EDGE_UNKNOWN, OK, base_edge, load_edge, reconnect, \
     store_edge
 from gdlearn.integrators.photon.photon_manifold import CHAIN_UNKNOWN, VolumeChain, complete_volume_photon, \
     new_volume_chain
 from gdlearn.integrators.photon.volume_estimates import KERNEL_2D, _admit, beam_kernel
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.shifts.volume_photon import NULL, REFLECTED, TRANSLATED, camera_distance_copy, chord_half, \
-    photon_shift, ray_frame_copy
+from gdlearn.shifts.volume_photon import NULL, TRANSLATED, camera_distance_copy, chord_half, photon_shift, \
+    ray_frame_copy
 
 
 class GbreParams(NamedTuple):
@@ -368,16 +367,6 @@ def _shift_photon(sa, lp, mtab, v, gp, g, q, offs, pre, c_b, scr, stack):
                     ok = False
                 elif not ratio > 0.0:
                     ok = False
-        if not ok:
-            cnt[C_FAILED] += 1
-            for c in range(3):
-                acc[1 + j, c] += -1.0 * c_b[c]               # w = 1, no offset (PHOTONS.md Sec. 0.2)
-            continue
-        cnt[C_NULL if kind == NULL else C_MANIFOLD if walked else C_RECONNECTED] += 1
-        if kind == REFLECTED:
-            cnt[C_MIXED] += 1
-        wgt = mis_weight_from_log_ratio(math.log(ratio))      # Eq. 19, balance heuristic
-        for c in range(3):
-            acc[1 + j, c] += wgt * (c_o[c] - c_b[c])
-            acc[5 + j, c] += wgt * c_o[c]
+        wgt = mis_weight_from_log_ratio(math.log(ratio)) if ok else 1.0      # Eq. 19, balance heuristic
+        add_shift(acc, cnt, j, ok, kind, walked, c_o, c_b, wgt)
     return nbad

@@ -99,8 +99,9 @@ class Scratch(NamedTuple):
     rows: np.ndarray      # one distance sample's admitted photons (light-vertex rows; -1: dropped)
     cb: np.ndarray        # (n, 3): their base terms c_b
     edge: np.ndarray      # (n, EDGE_COLS): their recorded edges a -> b, computed once for all neighbours
-    acc: np.ndarray       # (8, 3): a distance sample's D_j (rows 0-3) and S_j (4-7), summed in photon order
-    cnt: np.ndarray       # (4, N_COUNTS) int64: its shift counts per neighbour
+    acc: np.ndarray       # (9, 3): a distance sample's D_j (rows 1 + j) and S_j (5 + j), as the buffers (row 0
+                          # unused: L is summed by _collect), summed in photon order
+    cnt: np.ndarray       # (N_COUNTS,) int64: its shift counts
     chain: VolumeChain    # the current photon's specular chain, built once for its four neighbours
 
 
@@ -138,8 +139,8 @@ def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
     # per-row scratch, allocated once (not per sample): the grid's candidates, then one distance
     # sample's admitted photons (row, base term) and their recorded edges (gvpm_light.base_edge)
     scr = Scratch(np.empty(nbuf, dtype=np.int64), np.empty((4, 12)), np.empty(nbuf, dtype=np.int64),
-                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)), np.empty((8, 3)),
-                  np.empty((4, N_COUNTS), dtype=np.int64), new_volume_chain())
+                  np.empty((nbuf, 3)), np.empty((nbuf, EDGE_COLS)), np.empty((9, 3)),
+                  np.empty(N_COUNTS, dtype=np.int64), new_volume_chain())
     for x in range(w):
         for hh in range(2):
             h = path_state(seed, y * w + x, sample0 + hh)
@@ -320,12 +321,11 @@ def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y,
     more than a null shift (~0.7 us measured for gvpm_light.reconnect as a call against inlined,
     on the spot medium)."""
     acc, cnt = scr.acc, scr.cnt
-    for j in range(4):
+    for i in range(1, 9):
         for c in range(3):
-            acc[j, c] = out.phi[hh, 1 + j, y, x, c]
-            acc[4 + j, c] = out.phi[hh, 5 + j, y, x, c]
-        for q in range(N_COUNTS):
-            cnt[j, q] = 0
+            acc[i, c] = out.phi[hh, i, y, x, c]
+    for q in range(N_COUNTS):
+        cnt[q] = 0
     nbad = 0
     for i in range(n):
         v = scr.rows[i]
@@ -334,21 +334,19 @@ def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y,
         scr.chain.state[0] = CHAIN_UNKNOWN
         for j in range(4):
             nbad += _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack)
-    for j in range(4):
+    for i in range(1, 9):
         for c in range(3):
-            out.phi[hh, 1 + j, y, x, c] = acc[j, c]
-            out.phi[hh, 5 + j, y, x, c] = acc[4 + j, c]
-        for q in range(N_COUNTS):
-            out.count[hh, q, y, x] += cnt[j, q]
+            out.phi[hh, i, y, x, c] = acc[i, c]
+    for q in range(N_COUNTS):
+        out.count[hh, q, y, x] += cnt[q]
     return nbad
 
 
 @inlined
 def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack):
     """Photon v (scratch row i, base term scr.cb[i]) shifted to neighbour j's gather point og[j]:
-    its terms added to D_j, S_j (scr.acc rows j, 4 + j) and its outcome to scr.cnt[j]. Returns
-    the non-finite terms dropped (counted, never written)."""
-    acc, cnt = scr.acc, scr.cnt
+    its terms and outcome added to the sums (:func:`add_shift`). Returns the non-finite terms
+    dropped (counted, never written)."""
     c_b = (scr.cb[i, 0], scr.cb[i, 1], scr.cb[i, 2])
     c_o = (0.0, 0.0, 0.0)
     ratio = 0.0
@@ -376,19 +374,28 @@ def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack):
                 ok = False
             elif not ratio > 0.0:
                 ok = False
-    if not ok:
-        cnt[j, C_FAILED] += 1
-        for c in range(3):
-            acc[j, c] += -1.0 * c_b[c]                         # w = 1, no offset (PHOTONS.md Sec. 0.2)
-        return nbad
-    if kind == NULL:
-        cnt[j, C_NULL] += 1
-        wgt = og[j, 11]                                        # a null shift's: the camera side's
-    else:
-        cnt[j, C_MANIFOLD if walked else C_RECONNECTED] += 1
-        cnt[j, C_MIXED] += kind == REFLECTED
-        wgt = mis_weight_from_log_ratio(math.log(ratio))       # Eq. 19, balance heuristic
-    for c in range(3):
-        acc[j, c] += wgt * (c_o[c] - c_b[c])
-        acc[4 + j, c] += wgt * c_o[c]
+    wgt = 1.0
+    if ok:
+        # Eq. 19, balance heuristic; a null shift's is the camera side's, computed once per sample
+        wgt = og[j, 11] if kind == NULL else mis_weight_from_log_ratio(math.log(ratio))
+    add_shift(scr.acc, scr.cnt, j, ok, kind, walked, c_o, c_b, wgt)
     return nbad
+
+
+@inlined
+def add_shift(acc, cnt, j, ok, kind, walked, c_o, c_b, wgt):
+    """Neighbour j's terms of one photon into a pixel half's sums (``acc`` rows as the buffers:
+    D_j at 1 + j, S_j at 5 + j) and its outcome into the counts ``cnt`` (C_*): D_j += w (c_o - c_b),
+    S_j += w c_o, or for a failed shift D_j -= c_b (w = 1, no offset; PHOTONS.md Sec. 0.2).
+    G-VPM's and G-BRE's camera passes."""
+    if not ok:
+        cnt[C_FAILED] += 1
+        for c in range(3):
+            acc[1 + j, c] += -1.0 * c_b[c]
+        return
+    cnt[C_NULL if kind == NULL else C_MANIFOLD if walked else C_RECONNECTED] += 1
+    if kind == REFLECTED:
+        cnt[C_MIXED] += 1
+    for c in range(3):
+        acc[1 + j, c] += wgt * (c_o[c] - c_b[c])
+        acc[5 + j, c] += wgt * c_o[c]

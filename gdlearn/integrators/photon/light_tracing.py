@@ -29,8 +29,9 @@ the camera may look through a specular surface, so a study can leave them out or
 A camera *inside* a medium (the fog box) makes the variance infinite: photons near the pinhole
 weigh 1/t^2, and their density does not fall with t (E[w^2] ~ int dt / t^2); the mean stays right,
 but pt is the reference there. The photon's light depth k and the camera segment make a path of
-k + 1 segments, so the tracer stops at max_depth - 1 scattering vertices, as VPM's does. Passes are independent (light paths of
-pass i use sample index i): the frame is their mean, its halves the even and odd passes.
+k + 1 segments, so the tracer stops at max_depth - 1 scattering vertices, as VPM's does. Passes
+are independent (light paths of pass i use sample index i): the frame is their mean, its halves
+the even and odd passes.
 """
 from __future__ import annotations
 

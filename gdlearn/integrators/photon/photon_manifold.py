@@ -163,13 +163,8 @@ def walks_back(yb, X, ys, Xo, ye, ne, shapes, etas, refr, targets, k):
         return False, 0.0
     Xb = np.empty((k, 3))
     ok, _, _ = M.predicted_walk(yb, Xo, ye, ne, ys, S, shapes, etas, refr, targets, k, Xb)
-    if not ok:
+    if not (ok and M.same_chain(yb, X, ys, Xb, k)):
         return False, 0.0
-    tol = 1e-7 * M.chain_length_scale(yb, X, ys, k)
-    for j in range(k):
-        for c in range(3):
-            if not abs(Xb[j, c] - X[j, c]) <= tol:
-                return False, 0.0
     return True, det_o
 
 
