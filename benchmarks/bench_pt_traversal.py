@@ -25,8 +25,8 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
 
-from gdlearn.kernels import bvh_build  # noqa: E402
-from gdlearn.kernels import packet_trace as PT  # noqa: E402
+from gdlearn.kernels.accel import bvh_build  # noqa: E402
+from gdlearn.kernels.accel import packet as PT  # noqa: E402
 from gdlearn.kernels.accel.bvh import STACK_SIZE, any_hit_inline, closest_hit_inline  # noqa: E402
 from gdlearn.kernels.camera import camera_ray  # noqa: E402
 from gdlearn.kernels.geometry import offset_origin, surface  # noqa: E402
@@ -134,7 +134,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     print(f"{'scene':13s} {'C_NODE':>6s} {'leaves':>6s} {'closest ns':>10s} {'any ns':>7s} {'packet closest':>14s} "
           f"{'packet any':>10s}")
-    costs = [bvh_build.C_NODE] + ([4.0, 8.0, 32.0, 64.0] if a.sweep else [])
+    costs = [bvh_build.C_NODE] + ([4.0, 6.0, 8.0, 12.0, 24.0, 32.0] if a.sweep else [])
     for name in a.scenes:
         scene = load(ROOT / "scenes" / f"{name}.xml", res=128, max_depth=8)
         sa = compile_scene(scene)

@@ -124,3 +124,51 @@ def test_quad_pairs_are_detected_only_for_parallelograms():
     assert _quad(tri(a + b, a), tri(b, a + b)) is not None          # the other windings
     assert _quad(tri(a, a + b), tri(a + b, 1.1 * b)) is None        # a trapezoid
     assert _quad(tri(a, 0.5 * a + b), tri(0.5 * a + b, b)) is None  # not split along a diagonal
+
+
+def test_wide_node_slab_tests_match_the_scalar_test_and_come_sorted():
+    """simd.children8 tests a wide node's 8 children at once: the children it counts must be those
+    the scalar ``bvh._box_hit`` enters, the nearest returned, the others pushed farthest first, each
+    key holding its child and its entry distance rounded down. Rays include axis-parallel ones
+    (reciprocal direction inf) and origins on a slab (0 * inf = NaN), the boxes flat ones."""
+    from numba import njit
+    from gdlearn.kernels.accel.bvh import _CHILD, _box_hit, _inv_dir, children8
+    from gdlearn.kernels.accel.bvh_build import WIDE, WIDE_ROWS
+
+    @njit
+    def run(nodes, o, d, tmax, keys, ts):
+        inv = _inv_dir(d)
+        for c in range(WIDE):
+            ts[c] = _box_hit(nodes, 0, c, o, inv, 0.0, tmax) if nodes[6 * WIDE + c] >= 0 else math.inf
+        return children8(nodes, np.int64(0), o, inv, 0.0, tmax, keys, 3)
+
+    rng = np.random.default_rng(11)
+    keys = np.zeros(16, np.int64)
+    ts = np.zeros(WIDE)
+    counts = np.zeros(WIDE + 1, int)
+    for trial in range(3000):
+        block = np.zeros((WIDE_ROWS, WIDE))
+        lo = rng.integers(-2, 2, (3, WIDE)).astype(float)
+        block[0:3], block[3:6] = lo, lo + rng.choice(4, (3, WIDE), p=[0.1, 0.3, 0.3, 0.3])   # some flat
+        block[6] = rng.permutation(100)[:WIDE]
+        block[6, rng.random(WIDE) < 0.2] = -1.0                                  # empty lanes
+        o = rng.integers(-6, 6, 3).astype(float) + rng.choice([0.0, 0.5], 3)      # on a slab, or not
+        d = block[0:3, rng.integers(WIDE)] + 0.5 - o + 0.3 * rng.normal(size=3)   # towards a box, about
+        d[rng.random(3) < 0.1] = 0.0                                             # axis-parallel
+        if not d.any():
+            continue
+        tmax = rng.choice([math.inf, 4.0])
+        n, near = run(block.reshape(-1), tuple(o), tuple(d / np.linalg.norm(d)), tmax, keys, ts)
+        entered = np.flatnonzero(ts < math.inf)
+        assert n == len(entered)
+        counts[n] += 1
+        if n == 0:
+            continue
+        pushed = list(keys[3:3 + n - 1]) + [near]          # the stack from its bottom, then the nearest
+        assert sorted(int(k) & int(_CHILD) for k in pushed) == sorted(block[6, entered].astype(int))
+        dist = np.array([np.int64(k & ~_CHILD).view(np.float64) for k in pushed])
+        assert np.all(np.diff(dist) <= 0.0)                                     # farthest first
+        for k, t in zip(pushed, dist):
+            t_exact = max(ts[list(block[6]).index(k & _CHILD)], 0.0)       # (a NaN slab can leave it < 0)
+            assert t <= t_exact and (t_exact == 0.0 or t >= t_exact * (1 - 2.0 ** -27))
+    assert counts[0] > 100 and counts[2:].sum() > 300 and counts[5:].sum() > 10   # all cases were met

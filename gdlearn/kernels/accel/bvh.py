@@ -1,23 +1,33 @@
 """Bounding volume hierarchy over all primitives: the closest-hit / any-hit traversals.
 
 Built by :mod:`gdlearn.kernels.accel.bvh_build` (binned SAH; triangles, and *quads* -- triangle pairs that
-form a parallelogram -- become the lanes of a leaf's block). Layout: ``node_info`` int32 (M, 5) =
-(first, count, ntri or axis, soa, lanes): a leaf has count > 0 and owns primitives first ..
-first+count-1, its ``ntri`` lane primitives (triangles) first; an interior node has count = 0,
-children ``first`` and ``first + 1``, split along ``axis``. ``nodes`` is one flat float64 array:
-node k's box (min, max) at ``6 k``, then each leaf's block of ``bvh_build.SOA_ROWS`` rows (p0, e1,
-e2 by component, lim, meta) of ``n8`` lanes (``lanes`` rounded up to a multiple of 8, the padding
-degenerate) starting at ``soa``.
+form a parallelogram -- become the lanes of a leaf's block; the binary tree is then collapsed into a
+*wide* one of up to ``WIDE`` = 8 children per interior node). Layout: ``node_info`` int32 (M, 5) =
+(first, count, ntri, soa, lanes), node 0 the root: a leaf has count > 0 and owns primitives first
+.. first+count-1, its ``ntri`` lane primitives (triangles) first; an interior node has count = 0,
+its block at ``first`` and ``ntri`` children. ``nodes`` is one flat float64 array of blocks: an
+interior node's ``bvh_build.WIDE_ROWS`` rows (its children's box minima x, y, z, maxima x, y, z,
+node indices) of 8 lanes, a leaf's ``bvh_build.SOA_ROWS`` rows (p0, e1, e2 by component, lim, meta)
+of ``n8`` lanes (``lanes`` rounded up to a multiple of 8, the padding degenerate) at ``soa``.
 
 A leaf's lanes are tested all at once by a branch-free loop the compiler vectorises (8 float64
 lanes with AVX-512) instead of one by one with a branch per test: on the Cornell box, one leaf of
 18 lanes (6 walls and 12 box faces) replaces a tree of 4-triangle leaves (benchmarks/README.md).
 
-Traversal (numba): front-to-back with an explicit stack. The stack is an int32 array of
-``STACK_SIZE`` the caller allocates once per thread/row and reuses (a per-ray allocation would cost
-as much as the traversal itself). Past its first ``DEPTH`` entries it doubles as float64 scratch
-where the vectorised leaf test leaves every lane's t, a, b: the nearest lane's values are then a
-load away instead of a dependent recomputation (~30 ns per closest hit on the Cornell box).
+An interior node's 8 children are tested the same way, as one vector slab test
+(:func:`gdlearn.kernels.accel.simd.children8`): on the mesh scene 72 leaves are reached through 3
+levels of wide nodes instead of 7 of binary ones, and the binary tree's two dependent slab tests
+and mispredicted ordering branch per level are gone (benchmarks/README.md: 130 -> 87 ns per closest
+hit).
+
+Traversal (numba): front-to-back with an explicit stack of *child keys* (a child's entry distance
+and node index in one int64, so that integer order is distance order and a popped child is
+skipped without a second slab test when a nearer hit was found since). The stack is an int32 array
+of ``STACK_SIZE`` the caller allocates once per thread/row and reuses (a per-ray allocation would
+cost as much as the traversal itself): its first ``DEPTH`` entries hold the keys, and past them it
+doubles as float64 scratch where the vectorised leaf test leaves every lane's t, a, b: the nearest
+lane's values are then a load away instead of a dependent recomputation (~30 ns per closest hit on
+the Cornell box).
 """
 import math
 
@@ -27,17 +37,21 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, build, build_scene  # noqa: F401
+from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE, CHILD_MASK, STACK_KEYS, build, build_scene  # noqa: F401
 from gdlearn.kernels.geometry import INFO_MAT, INFO_TYPE, intersect_prim
-from gdlearn.kernels.accel.simd import block8
+from gdlearn.kernels.accel.simd import block8, children8
 from gdlearn.kernels.layout import MAT_TYPE, NULL
 from gdlearn.kernels.jit import inlined, leaf, noalloc
 
-#: traversal stack entries (a depth-first stack of a binary tree of <= 2^64 leaves needs fewer)
-DEPTH = 64
+#: traversal stack entries: int64 child keys (two int32 entries each); a wide node pushes at most
+#: 7, and the build checks that 7 per level of its tree (plus the 8 a push writes) fit
+KEYS = STACK_KEYS
+DEPTH = 2 * KEYS
 #: the leaf test's scratch: t, a, b of up to LEAF_MAX lanes as float64 (two int32 entries each)
 _SCRATCH = 64
 STACK_SIZE = DEPTH + 2 * 3 * _SCRATCH
+_CHILD = np.int64(CHILD_MASK)
+_DIST = np.int64(~CHILD_MASK)
 
 # nearest-hit keys of _leaf_lanes: distance bits above, the lane below
 _KEY_LOW = np.int64(0xFF)
@@ -73,6 +87,29 @@ def _scratch(typingctx, stack):
 
 
 @intrinsic
+def _keys(typingctx, stack):
+    """The int64 array over ``stack[:DEPTH]`` (the same memory, no reference count): the
+    traversal's stack of child keys, valid while the stack lives."""
+    if not (isinstance(stack, types.Array) and stack.dtype == types.int32 and stack.ndim == 1):
+        return None
+    i64a = types.Array(types.int64, 1, "C")
+
+    def codegen(context, builder, signature, args):
+        src = context.make_array(stack)(context, builder, value=args[0])
+        dst = context.make_array(i64a)(context, builder)
+        i64 = llvm_ir.IntType(64)
+        size = builder.extract_value(src.shape, 0)
+        n = builder.sdiv(builder.select(builder.icmp_signed(">", size, i64(DEPTH)), i64(DEPTH), size), i64(2))
+        context.populate_array(dst, data=builder.bitcast(src.data, dst.data.type),
+                               shape=cgutils.pack_array(builder, [n]),
+                               strides=cgutils.pack_array(builder, [i64(8)]), itemsize=i64(8),
+                               meminfo=None)
+        return dst._getvalue()
+
+    return i64a(stack), codegen
+
+
+@intrinsic
 def _f64_bits(typingctx, x):
     """The IEEE-754 bits of a float64 as an int64 (a bitcast: no instruction at all)."""
     if not isinstance(x, types.Float):
@@ -96,15 +133,16 @@ def _fmax(a, b):
 
 
 @inlined
-def _box_hit(nodes, k, o, inv, tmin, tmax):
-    """Slab test of node k; returns the entry distance or inf."""
-    b = 6 * k
+def _box_hit(nodes, off, c, o, inv, tmin, tmax):
+    """Slab test of child c of the wide node whose block starts at ``off``; returns the entry
+    distance or inf. :func:`gdlearn.kernels.accel.simd.children8` does this for 8 children at once."""
+    b = np.int64(off) + c
     t0 = (nodes[b] - o[0]) * inv[0]
-    t1 = (nodes[b + 3] - o[0]) * inv[0]
-    ty0 = (nodes[b + 1] - o[1]) * inv[1]
-    ty1 = (nodes[b + 4] - o[1]) * inv[1]
-    tz0 = (nodes[b + 2] - o[2]) * inv[2]
-    tz1 = (nodes[b + 5] - o[2]) * inv[2]
+    t1 = (nodes[b + 3 * WIDE] - o[0]) * inv[0]
+    ty0 = (nodes[b + WIDE] - o[1]) * inv[1]
+    ty1 = (nodes[b + 4 * WIDE] - o[1]) * inv[1]
+    tz0 = (nodes[b + 2 * WIDE] - o[2]) * inv[2]
+    tz1 = (nodes[b + 5 * WIDE] - o[2]) * inv[2]
     # per axis the near and far slab; a NaN (0 * inf: origin on a slab, ray parallel) is ignored
     lo = _fmax(_fmax(_fmin(t0, t1), _fmin(ty0, ty1)), _fmax(_fmin(tz0, tz1), tmin))
     hi = _fmin(_fmin(_fmax(t0, t1), _fmax(ty0, ty1)), _fmin(_fmax(tz0, tz1), tmax)) * 1.0000000000000004
@@ -236,36 +274,30 @@ def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, sta
 
 @leaf
 def _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep):
-    """Front-to-back traversal of a tree whose root is an interior node."""
+    """Front-to-back traversal of a tree whose root is a wide interior node: the children a ray
+    enters are visited nearest first (:func:`gdlearn.kernels.accel.simd.children8` pushes the
+    others farthest first), and a popped child is skipped when its entry distance is past the
+    best hit found since."""
     inv = _inv_dir(d)
+    keys = _keys(stack)
     sp = 0
-    node = 0
+    node = np.int64(0)
     while True:
         if node_info[node, 1] > 0:
             best = _leaf_closest(nodes, node_info, prims, prim_info, node, o, d, tmin, best, scratch, keep)
         else:
-            a = node_info[node, 0]
-            b = a + 1
-            ta = _box_hit(nodes, a, o, inv, tmin, best[0])
-            tb = _box_hit(nodes, b, o, inv, tmin, best[0])
-            if tb < ta:                        # visit the nearer child first
-                a, b = b, a
-                ta, tb = tb, ta
-            if ta < math.inf:
-                if tb < math.inf:
-                    stack[sp] = b
-                    sp += 1
-                node = a
+            n, near = children8(nodes, np.int64(node_info[node, 0]), o, inv, tmin, best[0], keys, sp)
+            if n > 0:
+                sp += n - 1
+                node = near & _CHILD
                 continue
-            if tb < math.inf:
-                node = b
-                continue
-        # pop the next node still in front of the best hit
         found = False
+        bits = _f64_bits(best[0])
         while sp > 0:
             sp -= 1
-            node = stack[sp]
-            if _box_hit(nodes, node, o, inv, tmin, best[0]) < math.inf:
+            k = keys[sp]
+            if k & _DIST <= bits:                # distances >= +0: their bits are ordered as they are
+                node = k & _CHILD
                 found = True
                 break
         if not found:
@@ -285,13 +317,12 @@ def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_nu
 def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`)."""
     scratch = _scratch(stack)
+    keys = _keys(stack)
     inv = (0.0, 0.0, 0.0)
-    if node_info[0, 1] == 0:          # a tree, not one leaf: cull by the root's box first
+    if node_info[0, 1] == 0:          # a tree, not one leaf
         inv = _inv_dir(d)
-        if _box_hit(nodes, 0, o, inv, tmin, tmax) == math.inf:
-            return -1
     sp = 0
-    node = 0
+    node = np.int64(0)
     while True:
         first = node_info[node, 0]
         count = node_info[node, 1]
@@ -314,21 +345,13 @@ def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, 
                 if t < math.inf:
                     return i
         else:
-            a = first
-            b = first + 1
-            ta = _box_hit(nodes, a, o, inv, tmin, tmax)
-            tb = _box_hit(nodes, b, o, inv, tmin, tmax)
-            if ta < math.inf:
-                if tb < math.inf:
-                    stack[sp] = b
-                    sp += 1
-                node = a
-                continue
-            if tb < math.inf:
-                node = b
+            n, near = children8(nodes, np.int64(first), o, inv, tmin, tmax, keys, sp)
+            if n > 0:
+                sp += n - 1
+                node = near & _CHILD
                 continue
         if sp == 0:
             break
         sp -= 1
-        node = stack[sp]
+        node = keys[sp] & _CHILD
     return -1

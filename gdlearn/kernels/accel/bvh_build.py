@@ -9,7 +9,8 @@ share their first vertex and their diagonal and together form a parallelogram (e
 cube face, and many quad meshes) -- or a sphere / disk. Triangles and quads become *lanes* of a
 leaf's block, tested all at once by a vectorised loop; a quad costs one lane instead of two (the
 Cornell box: 18 lanes instead of 36). The primitives are then reordered so that every leaf is a
-contiguous range, its lane primitives first and a quad's two triangles adjacent.
+contiguous range, its lane primitives first and a quad's two triangles adjacent, and the binary
+tree is collapsed into a wide one (:func:`_collapse`).
 
 A lane stores p0, e1, e2 (a triangle's edges, or a parallelogram's sides E1, E3), the bound ``lim``
 of a + b (1 for a triangle, 2 for a parallelogram) and ``meta`` = 8 * (rank of its first primitive
@@ -24,16 +25,26 @@ from gdlearn.kernels.geometry import P_TRIANGLE
 
 N_BINS = 12
 #: SAH costs in units of one lane of a vectorised leaf, measured on this machine with
-#: benchmarks/bench_pt_traversal.py: visiting an interior node (two slab tests, ordering, stack), starting
-#: a leaf, testing a sphere or disk (scalar). A leaf holds at most LEAF_MAX items (a lane's index
-#: must fit the 8 low bits of a nearest-hit key).
-C_NODE = 16.0
+#: benchmarks/bench_pt_traversal.py --sweep: a level of the binary tree (once collapsed, an eighth
+#: to a third of a wide node's slab test and sort; 8 measured best on the mesh scene, and keeps the
+#: small scenes one leaf), starting a leaf, testing a sphere or disk (scalar). A leaf holds at most
+#: LEAF_MAX items (a lane's index must fit the 8 low bits of a nearest-hit key).
+C_NODE = 8.0
 C_LEAF = 2.0
 C_LANE = 1.0
 C_PRIM = 6.0
 LEAF_MAX = 64
 #: lanes per block row: a multiple of the SIMD width (8 float64 with AVX-512)
 LANES = 8
+#: children of a wide interior node, tested at once (``simd.children8``); its block's rows
+WIDE = 8
+WIDE_ROWS = 7
+#: low bits of a traversal's child key that hold the child's node index (the rest: its entry
+#: distance's bits, ``simd.children8``)
+CHILD_BITS = 24
+CHILD_MASK = (1 << CHILD_BITS) - 1
+#: the traversal's stack of child keys (``bvh.KEYS``; a wide node pushes at most WIDE - 1)
+STACK_KEYS = 256
 SOA_ROWS = 11
 ROW_LIM, ROW_META = 9, 10
 K_QUAD, K_A_DIAG, K_B_DIAG = 1, 2, 4
@@ -151,6 +162,46 @@ def _items(rows, types, shape_of):
     return items
 
 
+def _collapse(boxes, info):
+    """The binary tree as a wide one: (rows, children) -- binary nodes in depth-first order, root
+    first, each interior one with its WIDE or fewer children: its two, then repeatedly the two of
+    its interior child of the largest surface area (Wald et al. 2008, "Getting rid of packets")."""
+    rows, children, depth = [], {}, {0: 1}
+    work = [0]
+    while work:
+        b = work.pop()
+        rows.append(b)
+        if info[b, 1] > 0:
+            continue
+        kids = [int(info[b, 0]), int(info[b, 0]) + 1]
+        while len(kids) < WIDE:
+            inner = [c for c in kids if info[c, 1] == 0]
+            if not inner:
+                break
+            c = max(inner, key=lambda c: _area(boxes[c, 3:6] - boxes[c, 0:3]))
+            i = kids.index(c)
+            kids[i:i + 1] = [int(info[c, 0]), int(info[c, 0]) + 1]
+        children[b] = kids
+        for c in kids:
+            depth[c] = depth[b] + 1
+        work.extend(reversed(kids))
+    if (WIDE - 1) * max(depth.values()) + WIDE > STACK_KEYS:
+        raise ValueError(f"the BVH is {max(depth.values())} levels deep: more than the traversal's stack "
+                         f"(bvh.KEYS = {STACK_KEYS} keys) can hold; raise bvh_build.STACK_KEYS and bvh.KEYS")
+    return rows, children
+
+
+def _wide_block(boxes, kids, row_of):
+    """A wide node's block: its children's box minima and maxima and node indices, WIDE lanes per
+    row (empty lanes: index -1, never entered)."""
+    block = np.zeros((WIDE_ROWS, WIDE))
+    block[6, :] = -1.0
+    for j, c in enumerate(kids):
+        block[0:6, j] = boxes[c]
+        block[6, j] = row_of[c]
+    return block
+
+
 def build_scene(rows, types, shape_of, lo, hi):
     """The traversal's arrays for primitive rows ``rows`` (geometry layout) of types ``types`` from
     shapes ``shape_of``, with boxes lo/hi: returns (order, nodes, node_info) -- apply ``order`` to
@@ -163,16 +214,20 @@ def build_scene(rows, types, shape_of, lo, hi):
     sizes = np.array([len(items[k][0]) for k in iorder])
     offs = np.concatenate([[0], np.cumsum(sizes)])
     order = np.array([p for k in iorder for p in items[k][0]], dtype=np.int64)
-    m = len(boxes)
-    node_info = np.zeros((m, 5), dtype=np.int32)
-    parts = [boxes.reshape(-1)]
-    off = 6 * m
-    for k in range(m):
+    wide, children = _collapse(boxes, info)
+    if len(wide) > CHILD_MASK:
+        raise ValueError(f"{len(wide)} BVH nodes: a child key holds at most {CHILD_MASK} (simd.CHILD_BITS)")
+    row_of = {b: r for r, b in enumerate(wide)}
+    node_info = np.zeros((len(wide), 5), dtype=np.int32)
+    parts, off = [], 0
+    for r, k in enumerate(wide):
         first, count, nl = (int(x) for x in info[k])
         if count == 0:
-            node_info[k, :3] = info[k]
+            node_info[r, 0], node_info[r, 2] = off, len(children[k])
+            parts.append(_wide_block(boxes, children[k], row_of).reshape(-1))
+            off += WIDE_ROWS * WIDE
             continue
-        node_info[k, :3] = offs[first], offs[first + count] - offs[first], offs[first + nl] - offs[first]
+        node_info[r, :3] = offs[first], offs[first + count] - offs[first], offs[first + nl] - offs[first]
         if nl == 0:
             continue
         n8 = -(-nl // LANES) * LANES
@@ -182,7 +237,8 @@ def build_scene(rows, types, shape_of, lo, hi):
             block[0:3, j], block[3:6, j], block[6:9, j] = p0, e1, e2
             block[ROW_LIM, j] = 2.0 if kind & K_QUAD else 1.0
             block[ROW_META, j] = 8 * (offs[first + j] - offs[first]) + kind
-        node_info[k, 3], node_info[k, 4] = off, nl
+        node_info[r, 3], node_info[r, 4] = off, nl
         parts.append(block.reshape(-1))
         off += block.size
-    return order, np.ascontiguousarray(np.concatenate(parts)), node_info
+    nodes = np.concatenate(parts) if parts else np.zeros(0)
+    return order, np.ascontiguousarray(nodes), node_info

@@ -25,7 +25,7 @@ import numpy as np
 
 
 from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits, _fmax, _fmin
-from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META
+from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
 from gdlearn.kernels.jit import leaf
 
 #: rays per packet (64 float64 per row: 8 AVX-512 vectors)
@@ -117,11 +117,12 @@ def _leaf(nodes, node_info, node, S, Q, ro, any_hit):
 
 
 @leaf
-def _box_any(nodes, k, S, Q, ro, any_hit):
-    """Does any ray of the packet (still looking) enter node k's box before its tmax? The scalar
-    ``bvh._box_hit`` per ray, including its 2-ulp widening."""
-    b = 6 * k
-    lx, ly, lz, hx, hy, hz = nodes[b], nodes[b + 1], nodes[b + 2], nodes[b + 3], nodes[b + 4], nodes[b + 5]
+def _box_any(nodes, b, S, Q, ro, any_hit):
+    """Does any ray of the packet (still looking) enter the box of a wide node's child whose
+    minimum x is at ``nodes[b]``, before its tmax? The scalar ``bvh._box_hit`` per ray, including
+    its 2-ulp widening."""
+    lx, ly, lz = nodes[b], nodes[b + WIDE], nodes[b + 2 * WIDE]
+    hx, hy, hz = nodes[b + 3 * WIDE], nodes[b + 4 * WIDE], nodes[b + 5 * WIDE]
     hit = np.int64(0)
     for j in range(PK):
         ox, oy, oz = S[ro * PK + j], S[(ro + 1) * PK + j], S[(ro + 2) * PK + j]
@@ -140,7 +141,7 @@ def _box_any(nodes, k, S, Q, ro, any_hit):
 def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
     """Trace the packet's ray set at row ``ro`` (t in (0, tmax)). Closest hit: Q_PRIM (-1 on a miss)
     and the hit's t (in the tmax row), S_U, S_V; ``any_hit``: Q_HIT is 1 for a blocked ray.
-    ``stack`` is the scalar traversal's (its first 64 entries)."""
+    ``stack`` is the scalar traversal's (its first ``bvh.DEPTH`` entries, as int32 nodes)."""
     for j in range(PK):
         if any_hit:
             Q[Q_HIT * PK + j] = 0
@@ -158,22 +159,21 @@ def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
     while True:
         if node_info[node, 1] > 0:
             _leaf(nodes, node_info, node, S, Q, ro, any_hit)
-        else:
-            a = node_info[node, 0]
-            if _box_any(nodes, a, S, Q, ro, any_hit):
-                stack[sp] = a + 1                 # the sibling is tested when it is popped
-                sp += 1
-                node = a
+        else:                                     # the children any ray enters; the first is next
+            off = np.int64(node_info[node, 0])
+            nxt = -1
+            for c in range(node_info[node, 2]):
+                if _box_any(nodes, off + c, S, Q, ro, any_hit):
+                    child = np.int64(nodes[off + 6 * WIDE + c])
+                    if nxt >= 0:
+                        stack[sp] = child
+                        sp += 1
+                    else:
+                        nxt = child
+            if nxt >= 0:
+                node = nxt
                 continue
-            if _box_any(nodes, a + 1, S, Q, ro, any_hit):
-                node = a + 1
-                continue
-        found = False
-        while sp > 0:
-            sp -= 1
-            node = stack[sp]
-            if _box_any(nodes, node, S, Q, ro, any_hit):
-                found = True
-                break
-        if not found:
+        if sp == 0:
             break
+        sp -= 1
+        node = stack[sp]

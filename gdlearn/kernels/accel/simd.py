@@ -16,7 +16,10 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-W = 8                                      # lanes per block
+from gdlearn.kernels.accel.bvh_build import CHILD_MASK, WIDE
+
+W = 8                                      # lanes per block (and children per wide node)
+assert WIDE == W
 _KEY_HIGH = 0x7FFFFFFFFFFFFF00             # see bvh: distance bits, the sign bit cleared
 _NO_HIT = 0x7FFFFFFFFFFFFFFF
 
@@ -86,5 +89,86 @@ def block8(typingctx, nodes, i, s, o, d, tmin, tmax, k0, scratch, keep):
         smin = cgutils.get_or_insert_function(builder.module, ir.FunctionType(i64, [vi]),
                                               "llvm.vector.reduce.smin.v8i64")
         return builder.call(smin, [key])
+
+    return sig, codegen
+
+
+# ------------------------------------------------------------------------------- wide interior nodes
+#: an optimal sorting network for 8 keys (Knuth, TAOCP vol. 3, 5.3.4: 19 comparators in 6 layers),
+#: each layer's comparators disjoint so that a layer is one min, one max and one blend of vectors
+NETWORK8 = (((0, 2), (1, 3), (4, 6), (5, 7)), ((0, 4), (1, 5), (2, 6), (3, 7)),
+            ((0, 1), (2, 3), (4, 5), (6, 7)), ((2, 4), (3, 5)), ((1, 4), (3, 6)),
+            ((1, 2), (3, 4), (5, 6)))
+
+
+def _sort_desc(builder, v, vi):
+    """The 8 int64 lanes of ``v`` sorted in descending order (:data:`NETWORK8`)."""
+    i32 = ir.IntType(32)
+    for layer in NETWORK8:
+        perm, upper = list(range(W)), [False] * W
+        for a, b in layer:
+            perm[a], perm[b] = b, a
+            upper[a] = True                       # the lower lane of a pair keeps the larger key
+        other = builder.shuffle_vector(v, ir.Constant(vi, ir.Undefined), ir.Constant(ir.VectorType(i32, W), perm))
+        gt = builder.icmp_signed(">", v, other)
+        big, small = builder.select(gt, v, other), builder.select(gt, other, v)
+        v = builder.select(ir.Constant(ir.VectorType(ir.IntType(1), W), upper), big, small)
+    return v
+
+
+@intrinsic
+def children8(typingctx, nodes, off, o, inv, tmin, tmax, keys, sp):
+    """Slab tests of a wide node's 8 children at once: returns (n, nearest), the number of children
+    whose box the ray enters in (tmin, tmax) and the key of the nearest, and stores the keys of all
+    8 lanes, farthest first, at ``keys[sp : sp + 8]`` (so the n - 1 others are pushed in the order
+    a front-to-back traversal pops them; the lanes past them are scratch).
+
+    The node's block at ``nodes[off:]`` is 7 rows of 8 lanes: the children's box minima (x, y, z),
+    maxima (x, y, z) and node indices (as float64; -1 for an empty lane). Per lane the arithmetic,
+    NaN handling and 2-ulp widening are ``bvh._box_hit``'s. A key is the entry distance's IEEE bits
+    with the low ``bvh_build.CHILD_BITS`` replaced by the child's index: integer order is distance order,
+    and the distance it keeps is rounded down (a node is never culled by it wrongly)."""
+    if not (isinstance(keys, types.Array) and keys.dtype == types.int64):
+        return None
+    sig = types.UniTuple(types.int64, 2)(nodes, off, o, inv, tmin, tmax, keys, sp)
+
+    def codegen(context, builder, signature, args):
+        a_nodes, a_off, a_o, a_inv, a_tmin, a_tmax, a_keys, a_sp = args
+        f64, i64 = ir.DoubleType(), ir.IntType(64)
+        vd, vi = ir.VectorType(f64, W), ir.VectorType(i64, W)
+        base = context.make_array(signature.args[0])(context, builder, value=a_nodes).data
+        row = [_load(builder, base, builder.add(a_off, i64(W * r)), vd) for r in range(7)]
+        o3 = [_splat(builder, builder.extract_value(a_o, k), vd) for k in range(3)]
+        i3 = [_splat(builder, builder.extract_value(a_inv, k), vd) for k in range(3)]
+        mul, sub = builder.fmul, builder.fsub
+        cmp = builder.fcmp_ordered
+
+        def fmin(a, b):                     # bvh._fmin: b if b < a else a (a NaN in b is ignored)
+            return builder.select(cmp("<", b, a), b, a)
+
+        def fmax(a, b):
+            return builder.select(cmp(">", b, a), b, a)
+
+        t0 = [mul(sub(row[k], o3[k]), i3[k]) for k in range(3)]
+        t1 = [mul(sub(row[3 + k], o3[k]), i3[k]) for k in range(3)]
+        lo = fmax(fmax(fmin(t0[0], t1[0]), fmin(t0[1], t1[1])), fmax(fmin(t0[2], t1[2]), _splat(builder, a_tmin, vd)))
+        hi = fmin(fmin(fmax(t0[0], t1[0]), fmax(t0[1], t1[1])), fmin(fmax(t0[2], t1[2]), _splat(builder, a_tmax, vd)))
+        hi = mul(hi, ir.Constant(vd, [1.0000000000000004] * W))
+        zero = ir.Constant(vd, [0.0] * W)
+        ok = builder.and_(cmp("<=", lo, hi), cmp(">=", row[6], zero))
+        # keys of hits >= 0: -0 and the negative entries a NaN slab lets through (an origin on a
+        # slab of an axis-parallel ray) count as 0
+        lo = builder.select(cmp(">", lo, zero), lo, zero)
+        key = builder.and_(builder.bitcast(lo, vi), ir.Constant(vi, [~CHILD_MASK] * W))
+        key = builder.or_(key, builder.fptosi(row[6], vi))
+        key = _sort_desc(builder, builder.select(ok, key, ir.Constant(vi, [-1] * W)), vi)
+        kbase = context.make_array(signature.args[6])(context, builder, value=a_keys).data
+        _store(builder, key, kbase, a_sp, vi)
+        ctpop = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(8), [ir.IntType(8)]),
+                                               "llvm.ctpop.i8")
+        n = builder.zext(builder.call(ctpop, [builder.bitcast(ok, ir.IntType(8))]), i64)
+        last = builder.select(builder.icmp_signed(">", n, i64(0)), builder.sub(n, i64(1)), i64(0))
+        near = builder.extract_element(key, last)
+        return context.make_tuple(builder, signature.return_type, [n, near])
 
     return sig, codegen
