@@ -67,9 +67,23 @@ def test_effect_subsets_that_keep_every_diffuse_path(effects):
     assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("name", ["glossy-box", "caustics-box", "mirror-caustic", "caustic-closeup", "spot-medium"])
+def test_glossy_specular_spheres_and_spot_lights(name):
+    """Rough plastic and metal (the glossy box), glass and mirror spheres (traced ray by ray: no
+    packet test for spheres), a spot light (spot-medium without its medium's null-BSDF cube, rendered
+    by ``path``): any BSDF but null, any emitter but an environment, as long as every effect is kept."""
+    scene = load(ROOT / "scenes" / f"{name}.xml", res=16, max_depth=8)
+    scene.integrator.type = "path"
+    scene.shapes = [sh for sh in scene.shapes if sh.bsdf is None or sh.bsdf.type != "null"]
+    a, b, _, _ = _pair(scene, spp=3)
+    assert a.mean() > 0 and np.array_equal(a, b)
+
+
 def test_scenes_it_does_not_accept_render_one_path_at_a_time():
-    caustics = load(ROOT / "scenes" / "caustics-box.xml", res=8)          # spheres, glass, mirror
-    for scene, kw in ((caustics, {}), (cornell_box(res=8), {"effects": "diffuse-interreflection"})):
+    fog = load(ROOT / "scenes" / "fog-box.xml", res=8)                        # media (volpath)
+    glossy = load(ROOT / "scenes" / "glossy-box.xml", res=8)
+    for scene, kw in ((fog, {}), (cornell_box(res=8), {"effects": "diffuse-interreflection"}),
+                      (glossy, {"effects": "emission,direct-lighting,diffuse-interreflection"})):
         assert not make("pt", scene, **kw).packets
         with pytest.raises(ValueError, match="packets"):
             make("pt", scene, packets=True, **kw)

@@ -114,6 +114,11 @@ class EffectsPlan:
         """The effects that will be rendered."""
         return names_of(self.mask)
 
+    @property
+    def possible_mask(self) -> int:
+        """The class bits of the effects the scene can show (``possible``)."""
+        return sum(1 << c for c, name in enumerate(CLASS_NAMES) if self.possible.get(name))
+
     def describe(self) -> str:
         depth = "unbounded" if self.max_depth < 0 else str(self.max_depth)
         out = [f"Effects plan for {self.scene_path}  (integrator {self.integrator}, max_depth {depth})",
@@ -208,7 +213,7 @@ def _request(p, scene, request):
             raise EffectsError(f"{scene.path}: <default name=\"effects\">: {err}") from None
         raise
     p.requested = names_of(want)
-    possible = sum(1 << c for c, n in enumerate(CLASS_NAMES) if p.possible[n])
+    possible = p.possible_mask
     p.mask = want & possible
     p.unavailable = names_of(want & ~possible)
 

@@ -1,5 +1,5 @@
-"""The packet path tracer: Mitsuba 3's ``path`` for ``PK`` paths at once, for surfaces of diffuse
-BSDFs lit by area emitters (the Cornell box, the mesh scene), the same estimator bit for bit.
+"""The packet path tracer: Mitsuba 3's ``path`` for ``PK`` paths at once, for surface scenes
+rendered whole (every effect they can show), the same estimator bit for bit.
 
 :func:`gdlearn.integrators.path.surface.radiance_path` follows one path from the camera to its end; the
 bounces of a path depend on each other, so most of a bounce waits for the previous one (a chain of
@@ -15,28 +15,32 @@ order on the same random numbers (``rand_at(h, dim(bounce, k))``); the per-sampl
 kept per item and summed per pixel in sample order afterwards. So the image equals the scalar
 kernel's bit for bit (tests/test_pt_packet.py), threads and passes included.
 
-:func:`eligible` says when it applies: no media (``path``), every BSDF ``diffuse``, every emitter
-an area emitter, no environment, every primitive a triangle without vertex normals, an effects
-mask that keeps all the (diffuse) paths the depth allows. Everything else renders with
-:mod:`gdlearn.integrators.path.surface`.
+:func:`eligible` says when it applies: no media (``path``), no null BSDF, no environment, an
+effects mask that keeps every effect the scene can show at the depth rendered (the packet tracer
+tracks no path classes: with nothing to drop, every contribution counts). Everything else renders
+with :mod:`gdlearn.integrators.path.surface`. Rays are traced as a packet when the scene is one leaf
+of triangles and parallelograms (the Cornell box, the glossy box), else ray by ray with the
+scalar traversal (spheres, trees: incoherent rays through a tree share too few nodes for a packet
+to pay), and still gain from the lanes' overlap.
 """
 import math
 
 import numpy as np
 
 
-from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_eval, bsdf_pdf
+from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.geometry import G_HASN, INFO_EMITTER, INFO_MAT, INFO_TYPE, P_TRIANGLE, offset_origin, surface
-from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE
-from gdlearn.kernels.lights import E_AREA, EM_TYPE, emitter_pdf, eval_emitter, sample_emitter
-from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_HIT, Q_PRIM, S_U, S_V, lanes_only, packet_trace
-from gdlearn.kernels.pathclass import DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, EMISSION
+from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
+from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE, NULL
+from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
+from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
+from gdlearn.kernels.pathclass import (CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, EMISSION, GLOSSY,
+                                       MEDIA_TRANSPORT, SPECULAR, SURFACE_TRANSPORT)
 from gdlearn.kernels.rng import path_state, rand, rand_at
 from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_hemisphere
 from gdlearn.kernels.scene_query import shadow_ray
-from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_RR, dim
+from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
 from gdlearn.kernels.jit import block, leaf, noalloc
 
@@ -53,7 +57,8 @@ R_ETA = R_PPDF + 1
 R_UEM = R_ETA + 1       # 3: this bounce's random numbers for the emitter sample
 R_WO = R_UEM + 3        # 3: its cosine-weighted direction (local frame) for the BSDF sample
 R_URR = R_WO + 3        # its Russian-roulette number
-R_P, R_NG, R_NS, R_FS, R_FT, R_WI = (R_URR + 1 + 3 * k for k in range(6))   # the vertex: point, normals,
+R_UBSDF = R_URR + 1     # 3: its BSDF sample's numbers (lobe, direction) for other BSDFs than diffuse
+R_P, R_NG, R_NS, R_FS, R_FT, R_WI = (R_UBSDF + 3 + 3 * k for k in range(6))   # the vertex: point, normals,
 N_S = R_WI + 3                                                            # shading frame, wi (local)
 # int rows (after the traversal's): path state, bounce, item (-1: idle lane), previous vertex delta,
 # path goes on after this bounce, a next-event term is pending
@@ -65,19 +70,20 @@ N_Q = Q_CONT + 1
 N_ITEMS = 4096
 
 
-def eligible(sa, mask, max_depth) -> bool:
+def eligible(sa, mask, max_depth, possible) -> bool:
     """Can the packet tracer render this compiled scene with this effects mask and max_depth?
 
-    The packet tracer tracks no path classes: with diffuse vertices only, a contribution after n
-    vertices is emission (n = 0), direct lighting (1) or diffuse interreflection (>= 2), so the
-    image is :func:`radiance_path`'s when the mask keeps every one of those the depth allows."""
+    ``possible``: the class bits the scene can show (the effects plan's ``possible``). The packet
+    tracer tracks no path classes, so the mask must keep every class a path can have at this
+    depth: emission (0 interior vertices), direct lighting (1) and, from max_depth 3 on, every
+    class of two or more surface vertices the scene can show."""
     need = 1 << EMISSION
     need |= (1 << DIRECT_LIGHTING) if max_depth >= 2 else 0
-    need |= (1 << DIFFUSE_INTERREFLECTION) if max_depth >= 3 else 0
-    tri = np.all(sa.prim_info[:, INFO_TYPE] == P_TRIANGLE) and not np.any(sa.prims[:, G_HASN] != 0.0)
-    return bool(mask & need == need and sa.env < 0 and len(sa.emitters) > 0
-                and np.all(sa.emitters[:, EM_TYPE] == E_AREA) and np.all(sa.materials[:, MAT_TYPE] == DIFFUSE)
-                and tri and lanes_only(sa.node_info))
+    if max_depth >= 3:
+        need |= (1 << DIFFUSE_INTERREFLECTION) | (1 << GLOSSY) | (1 << SPECULAR) | (1 << CAUSTICS)
+    need &= possible
+    return bool(mask & need == need and mask & (MEDIA_TRANSPORT | SURFACE_TRANSPORT) == 0 and sa.env < 0
+                and len(sa.emitters) > 0 and not np.any(sa.materials[:, MAT_TYPE] == NULL))
 
 
 @block
@@ -153,7 +159,9 @@ def _draw(S, Q):
         S[R_UEM * PK + j] = rand_at(h, dim(b, D_EM_SEL))
         S[(R_UEM + 1) * PK + j] = rand_at(h, dim(b, D_EM_U1))
         S[(R_UEM + 2) * PK + j] = rand_at(h, dim(b, D_EM_U2))
-        _set3(S, R_WO, j, square_to_cosine_hemisphere(rand_at(h, dim(b, D_BSDF_U1)), rand_at(h, dim(b, D_BSDF_U2))))
+        u1, u2 = rand_at(h, dim(b, D_BSDF_U1)), rand_at(h, dim(b, D_BSDF_U2))
+        _set3(S, R_WO, j, square_to_cosine_hemisphere(u1, u2))
+        _set3(S, R_UBSDF, j, (rand_at(h, dim(b, D_LOBE)), u1, u2))
         S[R_URR * PK + j] = rand_at(h, dim(b, D_RR))
 
 
@@ -218,9 +226,11 @@ def _shade_nee(sa, S, Q, j):
     """The next-event estimate of lane j's vertex (pending its shadow ray)."""
     if Q[Q_CONT * PK + j] == 0:
         return
+    mat = sa.materials[Q[Q_MAT * PK + j]]
+    if bsdf_is_delta_only(mat):
+        return
     frame = (_get3(S, R_FS, j), _get3(S, R_FT, j), _get3(S, R_NS, j))
-    _nee(sa, S, Q, j, _get3(S, R_P, j), _get3(S, R_NG, j), frame, _get3(S, R_WI, j),
-         sa.materials[Q[Q_MAT * PK + j]], _get3(S, R_BETA, j))
+    _nee(sa, S, Q, j, _get3(S, R_P, j), _get3(S, R_NG, j), frame, _get3(S, R_WI, j), mat, _get3(S, R_BETA, j))
 
 
 @leaf
@@ -230,7 +240,11 @@ def _shade_next(sa, S, Q, j, rr_depth):
         return
     mat = sa.materials[Q[Q_MAT * PK + j]]
     wi = _get3(S, R_WI, j)
-    wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, _get3(S, R_WO, j))
+    if mat[MAT_TYPE] == DIFFUSE:
+        wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, _get3(S, R_WO, j))
+    else:
+        u = _get3(S, R_UBSDF, j)
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u[0], u[1], u[2])
     if not pdf > 0.0:
         return
     beta = _get3(S, R_BETA, j)
@@ -261,9 +275,10 @@ def _shade_next(sa, S, Q, j, rr_depth):
 
 @leaf
 def _trace(sa, S, Q, ro, stack, any_hit):
-    """The lanes' rays at row ro: as a packet when the tree is one leaf; else ray by ray with the
-    scalar traversal (incoherent rays through a tree share too few nodes for a packet to pay)."""
-    if sa.node_info[0, 1] > 0:
+    """The lanes' rays at row ro: as a packet when the tree is one leaf of lanes; else ray by ray
+    with the scalar traversal (incoherent rays through a tree share too few nodes for a packet to
+    pay; spheres and disks have no packet test)."""
+    if sa.node_info[0, 1] > 0 and sa.node_info[0, 1] == sa.node_info[0, 2]:
         packet_trace(sa.nodes, sa.node_info, S, Q, ro, stack, any_hit)
         return
     for j in range(PK):

@@ -10,9 +10,10 @@ updated the same atomic reference counts from both cores, and 2 threads were bar
 
 The per-path kernels live in :mod:`gdlearn.integrators.path.surface` (``path``: surfaces only) and
 :mod:`gdlearn.integrators.path.volume` (``volpath``: homogeneous media, null interfaces, camera medium).
-A scene whose effects plan needs no media never compiles or runs the volume kernel. Scenes of
-diffuse triangles lit by area emitters (the Cornell box) are traced in packets of 64 paths
-(:mod:`gdlearn.integrators.path.packet`): the same image bit for bit, ~1.35x faster per core.
+A scene whose effects plan needs no media never compiles or runs the volume kernel. Surface
+scenes rendered whole (every effect they can show, no environment) are traced in packets of 64
+paths (:mod:`gdlearn.integrators.path.packet`): the same image bit for bit, ~1.35x faster per core
+on the Cornell box.
 """
 from __future__ import annotations
 
@@ -169,10 +170,10 @@ class PathTracer(ProgressiveIntegrator):
             s.mask |= TRANSPORT[transport]
         self.transport = transport
         super().__init__(s.scene, seed=seed, spp_per_pass=spp_per_pass)
-        can_pack = not s.media and surface_packet.eligible(s.sa, s.mask, s.max_depth)
+        can_pack = not s.media and surface_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
         if packets and not can_pack:
-            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py: diffuse BSDFs, area "
-                             "emitters, triangles, no media, every diffuse path kept); fix: packets=None or False")
+            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py: no media, no null "
+                             "BSDF, no environment, every effect the scene can show kept); fix: packets=None or False")
         self.packets = can_pack if packets is None else bool(packets) and can_pack
         self.kernel = render_rows_volpath if s.media else (render_rows_packet if self.packets else render_rows_path)
 
