@@ -128,11 +128,12 @@ def test_quad_pairs_are_detected_only_for_parallelograms():
 
 def test_wide_node_slab_tests_match_the_scalar_test_and_come_sorted():
     """simd.children8 tests a wide node's 8 children at once: the children it counts must be those
-    the scalar ``bvh._box_hit`` enters, the nearest returned, the others pushed farthest first, each
+    the scalar ``bvh._box_hit`` enters, the nearest returned, the others pushed (bvh._push_children,
+    simd.sort8) farthest first, each
     key holding its child and its entry distance rounded down. Rays include axis-parallel ones
     (reciprocal direction inf) and origins on a slab (0 * inf = NaN), the boxes flat ones."""
     from numba import njit
-    from gdlearn.kernels.accel.bvh import _CHILD, _box_hit, _inv_dir, children8
+    from gdlearn.kernels.accel.bvh import _CHILD, _box_hit, _inv_dir, _push_children, children8
     from gdlearn.kernels.accel.bvh_build import WIDE, WIDE_ROWS
 
     @njit
@@ -140,7 +141,10 @@ def test_wide_node_slab_tests_match_the_scalar_test_and_come_sorted():
         inv = _inv_dir(d)
         for c in range(WIDE):
             ts[c] = _box_hit(nodes, 0, c, o, inv, 0.0, tmax) if nodes[6 * WIDE + c] >= 0 else math.inf
-        return children8(nodes, np.int64(0), o, inv, 0.0, tmax, keys, 3)
+        n, near, far = children8(nodes, np.int64(0), o, inv, 0.0, tmax, keys, 3)
+        if n > 0:
+            _push_children(keys, 3, n, far)
+        return n, near
 
     rng = np.random.default_rng(11)
     keys = np.zeros(16, np.int64)

@@ -39,7 +39,7 @@ from numba.extending import intrinsic
 
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE, CHILD_MASK, STACK_KEYS, build, build_scene  # noqa: F401
 from gdlearn.kernels.geometry import INFO_MAT, INFO_TYPE, intersect_prim
-from gdlearn.kernels.accel.simd import block8, children8
+from gdlearn.kernels.accel.simd import block8, children8, sort8
 from gdlearn.kernels.layout import MAT_TYPE, NULL
 from gdlearn.kernels.jit import inlined, leaf, noalloc
 
@@ -272,12 +272,23 @@ def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, sta
     return best
 
 
+@inlined
+def _push_children(keys, sp, n, far):
+    """Push the n - 1 children (n >= 1) a ray enters besides the nearest, farthest first (their
+    keys from :func:`gdlearn.kernels.accel.simd.children8`); returns the new stack size. One other
+    child is pushed as it is (no branch: with none, the store is past the stack's top), more are
+    sorted first."""
+    keys[sp] = far
+    if n > 2:
+        sort8(keys, sp)
+    return sp + n - 1
+
+
 @leaf
 def _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep):
     """Front-to-back traversal of a tree whose root is a wide interior node: the children a ray
-    enters are visited nearest first (:func:`gdlearn.kernels.accel.simd.children8` pushes the
-    others farthest first), and a popped child is skipped when its entry distance is past the
-    best hit found since."""
+    enters are visited nearest first (:func:`_push_children` pushes the others farthest first), and
+    a popped child is skipped when its entry distance is past the best hit found since."""
     inv = _inv_dir(d)
     keys = _keys(stack)
     sp = 0
@@ -286,9 +297,9 @@ def _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, s
         if node_info[node, 1] > 0:
             best = _leaf_closest(nodes, node_info, prims, prim_info, node, o, d, tmin, best, scratch, keep)
         else:
-            n, near = children8(nodes, np.int64(node_info[node, 0]), o, inv, tmin, best[0], keys, sp)
+            n, near, far = children8(nodes, np.int64(node_info[node, 0]), o, inv, tmin, best[0], keys, sp)
             if n > 0:
-                sp += n - 1
+                sp = _push_children(keys, sp, n, far)
                 node = near & _CHILD
                 continue
         found = False
@@ -345,9 +356,9 @@ def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, 
                 if t < math.inf:
                     return i
         else:
-            n, near = children8(nodes, np.int64(first), o, inv, tmin, tmax, keys, sp)
+            n, near, far = children8(nodes, np.int64(first), o, inv, tmin, tmax, keys, sp)
             if n > 0:
-                sp += n - 1
+                sp = _push_children(keys, sp, n, far)
                 node = near & _CHILD
                 continue
         if sp == 0:

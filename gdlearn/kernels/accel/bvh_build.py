@@ -43,7 +43,8 @@ WIDE_ROWS = 7
 #: distance's bits, ``simd.children8``)
 CHILD_BITS = 24
 CHILD_MASK = (1 << CHILD_BITS) - 1
-#: the traversal's stack of child keys (``bvh.KEYS``; a wide node pushes at most WIDE - 1)
+#: the traversal's stack of child keys (``bvh.KEYS``; a wide node pushes at most WIDE - 1 and
+#: writes 9 keys from the top)
 STACK_KEYS = 256
 SOA_ROWS = 11
 ROW_LIM, ROW_META = 9, 10
@@ -185,7 +186,7 @@ def _collapse(boxes, info):
         for c in kids:
             depth[c] = depth[b] + 1
         work.extend(reversed(kids))
-    if (WIDE - 1) * max(depth.values()) + WIDE > STACK_KEYS:
+    if (WIDE - 1) * max(depth.values()) + WIDE + 1 > STACK_KEYS:      # a push writes 9 past the top
         raise ValueError(f"the BVH is {max(depth.values())} levels deep: more than the traversal's stack "
                          f"(bvh.KEYS = {STACK_KEYS} keys) can hold; raise bvh_build.STACK_KEYS and bvh.KEYS")
     return rows, children

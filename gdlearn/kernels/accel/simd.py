@@ -118,19 +118,21 @@ def _sort_desc(builder, v, vi):
 
 @intrinsic
 def children8(typingctx, nodes, off, o, inv, tmin, tmax, keys, sp):
-    """Slab tests of a wide node's 8 children at once: returns (n, nearest), the number of children
-    whose box the ray enters in (tmin, tmax) and the key of the nearest, and stores the keys of all
-    8 lanes, farthest first, at ``keys[sp : sp + 8]`` (so the n - 1 others are pushed in the order
-    a front-to-back traversal pops them; the lanes past them are scratch).
+    """Slab tests of a wide node's 8 children at once: returns (n, nearest, farthest), the number
+    of children whose box the ray enters in (tmin, tmax) and the keys of the nearest and the
+    farthest of them, and stores all 8 lanes' keys (-1 for a child not entered) at
+    ``keys[sp + 1 : sp + 9]`` for :func:`sort8` (``bvh._push_children``: with two children the
+    farthest is all there is to push, and no sort is needed; 80 % of the wide nodes of the mesh
+    scene's rays enter one or two).
 
     The node's block at ``nodes[off:]`` is 7 rows of 8 lanes: the children's box minima (x, y, z),
     maxima (x, y, z) and node indices (as float64; -1 for an empty lane). Per lane the arithmetic,
     NaN handling and 2-ulp widening are ``bvh._box_hit``'s. A key is the entry distance's IEEE bits
-    with the low ``bvh_build.CHILD_BITS`` replaced by the child's index: integer order is distance order,
-    and the distance it keeps is rounded down (a node is never culled by it wrongly)."""
+    with the low ``bvh_build.CHILD_BITS`` replaced by the child's index: integer order is distance
+    order, and the distance it keeps is rounded down (a node is never culled by it wrongly)."""
     if not (isinstance(keys, types.Array) and keys.dtype == types.int64):
         return None
-    sig = types.UniTuple(types.int64, 2)(nodes, off, o, inv, tmin, tmax, keys, sp)
+    sig = types.UniTuple(types.int64, 3)(nodes, off, o, inv, tmin, tmax, keys, sp)
 
     def codegen(context, builder, signature, args):
         a_nodes, a_off, a_o, a_inv, a_tmin, a_tmax, a_keys, a_sp = args
@@ -161,14 +163,37 @@ def children8(typingctx, nodes, off, o, inv, tmin, tmax, keys, sp):
         lo = builder.select(cmp(">", lo, zero), lo, zero)
         key = builder.and_(builder.bitcast(lo, vi), ir.Constant(vi, [~CHILD_MASK] * W))
         key = builder.or_(key, builder.fptosi(row[6], vi))
-        key = _sort_desc(builder, builder.select(ok, key, ir.Constant(vi, [-1] * W)), vi)
         kbase = context.make_array(signature.args[6])(context, builder, value=a_keys).data
-        _store(builder, key, kbase, a_sp, vi)
+        _store(builder, builder.select(ok, key, ir.Constant(vi, [-1] * W)), kbase, builder.add(a_sp, i64(1)), vi)
+        reduce = lambda op: cgutils.get_or_insert_function(  # noqa: E731
+            builder.module, ir.FunctionType(i64, [vi]), f"llvm.vector.reduce.{op}.v8i64")
+        # unsigned: a miss's -1 is the largest key for the minimum, 0 the smallest for the maximum
+        near = builder.call(reduce("umin"), [builder.select(ok, key, ir.Constant(vi, [-1] * W))])
+        far = builder.call(reduce("umax"), [builder.select(ok, key, ir.Constant(vi, [0] * W))])
         ctpop = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(8), [ir.IntType(8)]),
                                                "llvm.ctpop.i8")
         n = builder.zext(builder.call(ctpop, [builder.bitcast(ok, ir.IntType(8))]), i64)
-        last = builder.select(builder.icmp_signed(">", n, i64(0)), builder.sub(n, i64(1)), i64(0))
-        near = builder.extract_element(key, last)
-        return context.make_tuple(builder, signature.return_type, [n, near])
+        return context.make_tuple(builder, signature.return_type, [n, near, far])
+
+    return sig, codegen
+
+
+@intrinsic
+def sort8(typingctx, keys, sp):
+    """The 8 keys :func:`children8` stored at ``keys[sp + 1 : sp + 9]``, sorted in descending order
+    (:data:`NETWORK8`) into ``keys[sp : sp + 8]``: the children entered come first, farthest first,
+    so the n - 1 before the nearest are pushed in the order a front-to-back traversal pops them."""
+    if not (isinstance(keys, types.Array) and keys.dtype == types.int64):
+        return None
+    sig = types.none(keys, sp)
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        vi = ir.VectorType(i64, W)
+        kbase = context.make_array(signature.args[0])(context, builder, value=args[0]).data
+        ptr = builder.gep(kbase, [builder.add(args[1], i64(1))])
+        v = builder.load(builder.bitcast(ptr, vi.as_pointer()), align=8)
+        _store(builder, _sort_desc(builder, v, vi), kbase, args[1], vi)
+        return context.get_dummy_value()
 
     return sig, codegen
