@@ -44,6 +44,12 @@ def test_seeds_passes_threads_and_long_rows(seed, spp, pass_index, threads):
     assert np.array_equal(a, b)
 
 
+def test_more_samples_than_the_item_table():
+    # 4100 spp: one pixel's samples overflow the item table (N_ITEMS = 4096) and are traced in chunks
+    a, b, _, _ = _pair(cornell_box(res=2), spp=4100)
+    assert np.array_equal(a, b)
+
+
 def test_twosided_and_rr_depth():
     scene = cornell_box(res=20)
     scene = copy.deepcopy(scene)

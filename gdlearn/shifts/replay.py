@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 from gdlearn.kernels.jit import ir_inline
+from gdlearn.kernels.rng import rand
 
 
 #: Neighbour offsets (dx, dy) of the four shifts, in buffer order: right, left, down, up.
@@ -91,5 +92,21 @@ def shift_survival(base, threshold, q_min):
     return min(q, 1.0)
 
 
+@ir_inline
+def shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, counts):
+    """Survival probability of shift k of the base sample (seed, key, s) in pixel (x, y) of a
+    w x h image, or 0.0 if it is not traced: outside the image (``counts[1] += 1``) or skipped by
+    the roulette of :func:`shift_survival`, decided with random number ``DIM_SHIFT_RR + k``
+    (``counts[2] += 1``)."""
+    if not neighbour_inside(x, y, k, w, h):
+        counts[1] += 1
+        return 0.0
+    q = shift_survival(base, rr_threshold, rr_min)
+    if q < 1.0 and rand(seed, key, s, DIM_SHIFT_RR + k) >= q:
+        counts[2] += 1
+        return 0.0
+    return q
+
+
 __all__ = ["SHIFT_DX", "SHIFT_DY", "RIGHT", "LEFT", "DOWN", "UP", "SHIFT_WEIGHTS", "DIM_SHIFT_RR",
-           "offset_film_position", "neighbour_inside", "shift_survival"]
+           "offset_film_position", "neighbour_inside", "shift_survival", "shift_q"]

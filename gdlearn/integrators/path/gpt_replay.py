@@ -17,7 +17,8 @@ threads ever add into one element. The base image is bit-identical to ``pt``'s w
 (tested).
 
 Cost: a base path plus up to four offset paths per sample, about 5x a path-tracing sample
-(``benchmarks/bench_gpt_replay.py`` measures it). Stage timing ``trace`` covers base and offset
+(``benchmarks/bench_gpt_replay.py`` measures it). Where ``pt`` traces packets, so does this
+(:mod:`gdlearn.integrators.path.gpt_replay_packet`). Stage timing ``trace`` covers base and offset
 paths together (they are interleaved per sample); ``combine`` the gradient assembly.
 """
 from __future__ import annotations
@@ -32,11 +33,12 @@ from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_SHAPE
 from gdlearn.kernels.rng import rand
 from gdlearn.integrators.path.surface import radiance_path
+from gdlearn.integrators.path import packet as surface_packet
+from gdlearn.integrators.path.gpt_replay_packet import replay_rows_packet
 from gdlearn.integrators.path.volume import radiance_volpath
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.integrators.gradients import combine_gradients
-from gdlearn.shifts.replay import (DIM_SHIFT_RR, SHIFT_WEIGHTS, neighbour_inside,
-                             offset_film_position, shift_survival)
+from gdlearn.shifts.replay import SHIFT_WEIGHTS, offset_film_position, shift_q
 from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup, compile_by_tracing
 from gdlearn.kernels.jit import block, ir_inline, rows
@@ -50,19 +52,6 @@ DIAG_ABS_DIFF, DIAG_BASE, DIAG_SHIFTS, DIAG_OTHER_SURFACE = range(4)
 @ir_inline
 def _finite(c):
     return np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2])
-
-
-@ir_inline
-def _shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, counts):
-    """Survival probability of shift k, or 0.0 if it is not traced (outside / roulette)."""
-    if not neighbour_inside(x, y, k, w, h):
-        counts[1] += 1
-        return 0.0
-    q = shift_survival(base, rr_threshold, rr_min)
-    if q < 1.0 and rand(seed, key, s, DIM_SHIFT_RR + k) >= q:
-        counts[2] += 1
-        return 0.0
-    return q
 
 
 @ir_inline
@@ -128,7 +117,7 @@ def _replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, thresho
                     continue
                 _record(acc, 0, base, 1.0)
                 for k in range(4):
-                    q = _shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
+                    q = shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
                     if q == 0.0:
                         continue
                     ox, oy = offset_film_position(fx, fy, k)
@@ -178,7 +167,7 @@ def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thre
                     continue
                 _record(acc, 0, base, 1.0)
                 for k in range(4):
-                    q = _shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
+                    q = shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
                     if q == 0.0:
                         continue
                     ox, oy = offset_film_position(fx, fy, k)
@@ -199,9 +188,13 @@ def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thre
 
 class ReplayGPT(ProgressiveIntegrator):
     """``make("gpt-replay", scene, seed=0, spp_per_pass=1, effects=None, threads=None,
-    max_depth=None, shift_weights=(0.5, 0.5), shift_rr=0.0, shift_rr_min=0.1)``.
+    max_depth=None, shift_weights=(0.5, 0.5), shift_rr=0.0, shift_rr_min=0.1, packets=None)``.
 
     Options as :class:`~gdlearn.integrators.setup.SceneSetup`, plus:
+
+    * ``packets``: as ``pt``'s (:mod:`gdlearn.integrators.path.gpt_replay_packet`: the same buffers
+      bit for bit where :func:`gdlearn.integrators.path.packet.eligible` accepts the scene); the
+      decorrelation diagnostics always trace one path at a time.
 
     * ``shift_weights`` (forward, backward): Eq. 16's constant weights; they must sum to 1 (any
       such pair is unbiased; 0.5 / 0.5 is Eq. 17 under replay).
@@ -214,7 +207,8 @@ class ReplayGPT(ProgressiveIntegrator):
     name = "gpt-replay"
 
     def __init__(self, scene, *, shift_weights=SHIFT_WEIGHTS, shift_rr: float = 0.0, shift_rr_min: float = 0.1,
-                 seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None, max_depth=None, sa=None):
+                 seed: int = 0, spp_per_pass: int = 1, effects=None, threads=None, max_depth=None, sa=None,
+                 packets=None):
         self.setup = st = SceneSetup(scene, effects=effects, max_depth=max_depth, threads=threads, sa=sa)
         super().__init__(st.scene, seed=seed, spp_per_pass=spp_per_pass)
         wf, wb = (float(v) for v in shift_weights)
@@ -226,6 +220,11 @@ class ReplayGPT(ProgressiveIntegrator):
                              "in (0, 1] (a zero floor would bias gradients of black base paths)")
         self.shift_weights = (wf, wb)
         self.shift_rr, self.shift_rr_min = float(shift_rr), float(shift_rr_min)
+        can_pack = not st.media and surface_packet.eligible(st.sa, st.mask, st.max_depth, st.plan.possible_mask)
+        if packets and not can_pack:
+            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py: no media, no null "
+                             "BSDF, no environment, every effect the scene can show kept); fix: packets=None or False")
+        self.packets = can_pack if packets is None else bool(packets) and can_pack
         self.replay_kernel = replay_rows_volpath if st.media else replay_rows_path
 
     def trace(self, sample0: int, spp: int, diagnose: bool = False):
@@ -235,9 +234,10 @@ class ReplayGPT(ProgressiveIntegrator):
         out = np.zeros((5, h, w, 3))
         counts = np.zeros((h, 4), dtype=np.int64)
         diag = np.zeros((h, w, 4) if diagnose else (1, 1, 4))
+        kernel = replay_rows_packet if self.packets and not diagnose else self.replay_kernel
         with st.parallel(h):
-            self.replay_kernel(st.sa, self.seed, sample0, spp, st.max_depth, st.rr_depth, st.mask, st.threshold,
-                               self.shift_rr, self.shift_rr_min, out, counts, diag, diagnose)
+            kernel(st.sa, self.seed, sample0, spp, st.max_depth, st.rr_depth, st.mask, st.threshold,
+                   self.shift_rr, self.shift_rr_min, out, counts, diag, diagnose)
         return out, dict(zip(COUNT_NAMES, (int(v) for v in counts.sum(axis=0)))), (diag if diagnose else None)
 
     def compile(self) -> float:

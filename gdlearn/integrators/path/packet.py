@@ -86,10 +86,17 @@ def eligible(sa, mask, max_depth, possible) -> bool:
                 and len(sa.emitters) > 0 and not np.any(sa.materials[:, MAT_TYPE] == NULL))
 
 
+#: columns of the item table: film position x, y (raster), the pixel key and sample index whose
+#: random numbers the path uses (for random-sequence replay, another pixel's than the film position's)
+IT_FX, IT_FY, IT_KEY, IT_S = range(4)
+
+
 @block
 def new_buffers():
-    """A row's packet state (S, Q) and item radiances."""
-    return np.zeros(N_S * PK), np.zeros(N_Q * PK, dtype=np.int64), np.zeros(3 * N_ITEMS)
+    """A row's packet state (S, Q), item radiances and item table (N_ITEMS x 4, float64: every
+    integer in it is far below 2^53)."""
+    return (np.zeros(N_S * PK), np.zeros(N_Q * PK, dtype=np.int64), np.zeros(3 * N_ITEMS),
+            np.zeros((N_ITEMS, 4)))
 
 
 @leaf
@@ -103,13 +110,12 @@ def _set3(S, r, j, v):
 
 
 @leaf
-def _start(sa, S, Q, j, item, x0, y, w, spp, seed, sample0):
-    """Lane j starts the path of ``item`` (pixel x0 + item // spp, sample sample0 + item % spp):
-    ``pt._rows_path``'s camera ray and ``radiance_path``'s initial state."""
-    x = x0 + item // spp
-    s = sample0 + item % spp
-    key = y * w + x
-    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+def _start(sa, S, Q, j, item, items, seed):
+    """Lane j starts the path of ``item`` (a row of the item table ``items``): the camera ray through
+    its film position and ``radiance_path``'s initial state, with the random numbers of its key and
+    sample."""
+    key, s = np.int64(items[item, IT_KEY]), np.int64(items[item, IT_S])
+    o, d, tmax = camera_ray(sa.camera, items[item, IT_FX], items[item, IT_FY])
     _set3(S, R_O, j, o)
     _set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = tmax
@@ -297,7 +303,7 @@ def _trace(sa, S, Q, ro, stack, any_hit):
 
 
 @leaf
-def _finish(sa, S, Q, buf, nxt, nitems, x0, y, w, spp, seed, sample0):
+def _finish(sa, S, Q, buf, nxt, nitems, items, seed):
     """Add the visible next-event terms; a lane whose path ended stores its radiance and takes the
     next item. Returns the next item and the number of busy lanes."""
     busy = 0
@@ -312,53 +318,72 @@ def _finish(sa, S, Q, buf, nxt, nitems, x0, y, w, spp, seed, sample0):
             Q[Q_ITEM * PK + j] = -1
             S[(R_O + 6) * PK + j] = -1.0
             if nxt < nitems:
-                _start(sa, S, Q, j, nxt, x0, y, w, spp, seed, sample0)
+                _start(sa, S, Q, j, nxt, items, seed)
                 nxt += 1
         busy += Q[Q_ITEM * PK + j] >= 0
     return nxt, busy
 
 
+@leaf
+def trace_items(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
+    """The radiance of the camera paths of items 0 .. nitems-1 of the table ``items`` (film
+    position, key, sample: :data:`IT_FX` ...) into ``buf[3 i : 3 i + 3]``, each path
+    ``radiance_path``'s with the item's random numbers, ``PK`` paths at a time."""
+    nxt = 0
+    for j in range(PK):
+        Q[Q_ITEM * PK + j] = -1
+        S[(R_O + 6) * PK + j] = -1.0
+        if nxt < nitems:
+            _start(sa, S, Q, j, nxt, items, seed)
+            nxt += 1
+    busy = 1
+    while busy > 0:
+        _trace(sa, S, Q, R_O, stack, False)
+        _draw(S, Q)
+        for j in range(PK):                # one loop: three loops measured no faster
+            _shade_hit(sa, S, Q, j, max_depth)
+            _shade_nee(sa, S, Q, j)
+            _shade_next(sa, S, Q, j, rr_depth)
+        _trace(sa, S, Q, R_SO, stack, True)
+        nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, items, seed)
+
+
+@leaf
+def fill_pixel_items(items, i0, m, y, w, spp, seed, sample0):
+    """Items 0 .. m-1 of the table: ``pt._rows_path``'s camera samples i0 .. i0+m-1 of row y (pixel
+    by pixel, sample by sample), film positions and random numbers."""
+    for i in range(m):
+        x, s = (i0 + i) // spp, sample0 + (i0 + i) % spp
+        key = y * w + x
+        items[i, IT_FX], items[i, IT_FY] = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+        items[i, IT_KEY], items[i, IT_S] = key, s
+
+
 @noalloc
-def render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack):
+def render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items, acc, stack):
     """Row y of ``pt._rows_path``'s image (the mean of samples sample0 .. sample0+spp-1 per pixel
-    into out[y]), traced in packets; returns the number of non-finite samples dropped."""
+    into out[y]), traced in packets; returns the number of non-finite samples dropped. The row's
+    samples go through the item table in chunks; ``acc`` (W x 3) sums them per pixel in sample
+    order, as ``pt._rows_path`` does."""
     w = out.shape[1]
-    per = max(1, (buf.shape[0] // 3) // spp)           # pixels whose items fit the buffer
-    inv = 1.0 / spp
+    n = w * spp
+    acc[:, :] = 0.0
     nbad = 0
-    for x0 in range(0, w, per):
-        npx = min(per, w - x0)
-        nitems = npx * spp
-        nxt = 0
-        for j in range(PK):
-            Q[Q_ITEM * PK + j] = -1
-            S[(R_O + 6) * PK + j] = -1.0
-            if nxt < nitems:
-                _start(sa, S, Q, j, nxt, x0, y, w, spp, seed, sample0)
-                nxt += 1
-        busy = 1
-        while busy > 0:
-            _trace(sa, S, Q, R_O, stack, False)
-            _draw(S, Q)
-            for j in range(PK):                # one loop: three loops measured no faster
-                _shade_hit(sa, S, Q, j, max_depth)
-                _shade_nee(sa, S, Q, j)
-                _shade_next(sa, S, Q, j, rr_depth)
-            _trace(sa, S, Q, R_SO, stack, True)
-            nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, x0, y, w, spp, seed, sample0)
-        for xi in range(npx):                          # pt._rows_path's sum, in sample order
-            a0 = 0.0
-            a1 = 0.0
-            a2 = 0.0
-            for si in range(spp):
-                c0, c1, c2 = buf[3 * (xi * spp + si)], buf[3 * (xi * spp + si) + 1], buf[3 * (xi * spp + si) + 2]
-                if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2):
-                    a0 += c0
-                    a1 += c1
-                    a2 += c2
-                else:
-                    nbad += 1
-            out[y, x0 + xi, 0] = a0 * inv
-            out[y, x0 + xi, 1] = a1 * inv
-            out[y, x0 + xi, 2] = a2 * inv
+    for i0 in range(0, n, items.shape[0]):
+        m = min(items.shape[0], n - i0)
+        fill_pixel_items(items, i0, m, y, w, spp, seed, sample0)
+        trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
+        for i in range(m):
+            c0, c1, c2 = buf[3 * i], buf[3 * i + 1], buf[3 * i + 2]
+            if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2):
+                x = (i0 + i) // spp
+                acc[x, 0] += c0
+                acc[x, 1] += c1
+                acc[x, 2] += c2
+            else:
+                nbad += 1
+    inv = 1.0 / spp
+    for x in range(w):
+        for c in range(3):
+            out[y, x, c] = acc[x, c] * inv
     return nbad

@@ -94,13 +94,15 @@ def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter,
     sa = borrowed(sa)
     h = out.shape[0]
     stack = np.empty(STACK_SIZE, dtype=np.int32)
-    S, Q, buf = surface_packet.new_buffers()
+    S, Q, buf, items = surface_packet.new_buffers()
+    acc = np.zeros((out.shape[1], 3))
     while True:
         y0, y1 = next_rows(counter, step, h)
         if y0 == y1:
             return
         for y in range(y0, y1):
-            bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, stack)
+            bad[y] = render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items, acc,
+                                       stack)
 
 
 def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
