@@ -61,52 +61,44 @@ _U2, _U3, _U4, _U5, _U6, _U7, _U8, _U9 = (np.uint64(r) for r in range(2, 10))
 
 
 # --------------------------------------------------------------------------------------- traversal
-@intrinsic
-def _scratch(typingctx, stack):
-    """The float64 array over ``stack[DEPTH:]`` (the same memory, no reference count): the int32
-    stack's tail reinterpreted, valid while the stack lives (the caller's row or thread)."""
-    if not (isinstance(stack, types.Array) and stack.dtype == types.int32 and stack.ndim == 1):
-        return None
-    f64 = types.Array(types.float64, 1, "C")
+def _stack_view(dtype, tail):
+    """An intrinsic: the 8-byte ``dtype`` array over the int32 stack's tail ``stack[DEPTH:]``
+    (``tail``) or its head ``stack[:DEPTH]`` -- the same memory, no reference count, valid while the
+    stack lives (the caller's row or thread). A stack shorter than DEPTH has an empty tail."""
+    aty = types.Array(dtype, 1, "C")
 
-    def codegen(context, builder, signature, args):
-        src = context.make_array(stack)(context, builder, value=args[0])
-        dst = context.make_array(f64)(context, builder)
-        i64 = llvm_ir.IntType(64)
-        size = builder.extract_value(src.shape, 0)
-        n = builder.select(builder.icmp_signed(">", size, i64(DEPTH)),
-                           builder.sdiv(builder.sub(size, i64(DEPTH)), i64(2)), i64(0))
-        data = builder.gep(src.data, [i64(DEPTH)])
-        context.populate_array(dst, data=builder.bitcast(data, dst.data.type),
-                               shape=cgutils.pack_array(builder, [n]),
-                               strides=cgutils.pack_array(builder, [i64(8)]), itemsize=i64(8),
-                               meminfo=None)
-        return dst._getvalue()
+    def typer(typingctx, stack):
+        if not (isinstance(stack, types.Array) and stack.dtype == types.int32 and stack.ndim == 1):
+            return None
 
-    return f64(stack), codegen
+        def codegen(context, builder, signature, args):
+            src = context.make_array(stack)(context, builder, value=args[0])
+            dst = context.make_array(aty)(context, builder)
+            i64 = llvm_ir.IntType(64)
+            size = builder.extract_value(src.shape, 0)
+            big = builder.icmp_signed(">", size, i64(DEPTH))
+            if tail:
+                n = builder.select(big, builder.sdiv(builder.sub(size, i64(DEPTH)), i64(2)), i64(0))
+                data = builder.gep(src.data, [i64(DEPTH)])
+            else:
+                n = builder.sdiv(builder.select(big, i64(DEPTH), size), i64(2))
+                data = src.data
+            context.populate_array(dst, data=builder.bitcast(data, dst.data.type),
+                                   shape=cgutils.pack_array(builder, [n]),
+                                   strides=cgutils.pack_array(builder, [i64(8)]), itemsize=i64(8),
+                                   meminfo=None)
+            return dst._getvalue()
+
+        return aty(stack), codegen
+
+    typer.__name__ = typer.__qualname__ = "_scratch" if tail else "_keys"
+    return intrinsic(typer)
 
 
-@intrinsic
-def _keys(typingctx, stack):
-    """The int64 array over ``stack[:DEPTH]`` (the same memory, no reference count): the
-    traversal's stack of child keys, valid while the stack lives."""
-    if not (isinstance(stack, types.Array) and stack.dtype == types.int32 and stack.ndim == 1):
-        return None
-    i64a = types.Array(types.int64, 1, "C")
-
-    def codegen(context, builder, signature, args):
-        src = context.make_array(stack)(context, builder, value=args[0])
-        dst = context.make_array(i64a)(context, builder)
-        i64 = llvm_ir.IntType(64)
-        size = builder.extract_value(src.shape, 0)
-        n = builder.sdiv(builder.select(builder.icmp_signed(">", size, i64(DEPTH)), i64(DEPTH), size), i64(2))
-        context.populate_array(dst, data=builder.bitcast(src.data, dst.data.type),
-                               shape=cgutils.pack_array(builder, [n]),
-                               strides=cgutils.pack_array(builder, [i64(8)]), itemsize=i64(8),
-                               meminfo=None)
-        return dst._getvalue()
-
-    return i64a(stack), codegen
+#: float64 scratch over the stack's tail: the leaf test's t, a, b per lane
+_scratch = _stack_view(types.float64, tail=True)
+#: int64 child keys over the stack's head: the traversal's stack proper
+_keys = _stack_view(types.int64, tail=False)
 
 
 @intrinsic
