@@ -359,31 +359,43 @@ def fill_pixel_items(items, i0, m, y, w, spp, seed, sample0):
         items[i, IT_KEY], items[i, IT_S] = key, s
 
 
+@leaf
+def sum_items(buf, m, i0, spp, acc):
+    """Add the radiances of items 0 .. m-1 (the row's samples i0 .. i0+m-1) to their pixels' sums
+    ``acc`` (W x 3), in sample order as ``pt._rows_path`` does; returns the non-finite ones dropped."""
+    nbad = 0
+    for i in range(m):
+        c0, c1, c2 = buf[3 * i], buf[3 * i + 1], buf[3 * i + 2]
+        if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2):
+            x = (i0 + i) // spp
+            acc[x, 0] += c0
+            acc[x, 1] += c1
+            acc[x, 2] += c2
+        else:
+            nbad += 1
+    return nbad
+
+
+@leaf
+def write_row(out, y, acc, spp):
+    inv = 1.0 / spp
+    for x in range(out.shape[1]):
+        for c in range(3):
+            out[y, x, c] = acc[x, c] * inv
+
+
 @noalloc
 def render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items, acc, stack):
     """Row y of ``pt._rows_path``'s image (the mean of samples sample0 .. sample0+spp-1 per pixel
     into out[y]), traced in packets; returns the number of non-finite samples dropped. The row's
-    samples go through the item table in chunks; ``acc`` (W x 3) sums them per pixel in sample
-    order, as ``pt._rows_path`` does."""
-    w = out.shape[1]
-    n = w * spp
+    samples go through the item table in chunks; ``acc`` (W x 3) sums them per pixel."""
+    n = out.shape[1] * spp
     acc[:, :] = 0.0
     nbad = 0
     for i0 in range(0, n, items.shape[0]):
         m = min(items.shape[0], n - i0)
-        fill_pixel_items(items, i0, m, y, w, spp, seed, sample0)
+        fill_pixel_items(items, i0, m, y, out.shape[1], spp, seed, sample0)
         trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
-        for i in range(m):
-            c0, c1, c2 = buf[3 * i], buf[3 * i + 1], buf[3 * i + 2]
-            if np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2):
-                x = (i0 + i) // spp
-                acc[x, 0] += c0
-                acc[x, 1] += c1
-                acc[x, 2] += c2
-            else:
-                nbad += 1
-    inv = 1.0 / spp
-    for x in range(w):
-        for c in range(3):
-            out[y, x, c] = acc[x, c] * inv
+        nbad += sum_items(buf, m, i0, spp, acc)
+    write_row(out, y, acc, spp)
     return nbad

@@ -26,6 +26,8 @@ from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.rng import rand
 from gdlearn.integrators.path import packet as surface_packet
 from gdlearn.integrators.path.packet import render_row_packet
+from gdlearn.integrators.path import packet_volume as volume_packet
+from gdlearn.integrators.path.packet_volume import render_row_packet_volume
 from gdlearn.integrators.path.surface import radiance_path_inline
 from gdlearn.integrators.path.volume import radiance_volpath_inline
 from gdlearn.kernels.arrays import borrowed
@@ -105,6 +107,28 @@ def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter,
                                        stack)
 
 
+def render_rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
+    """As :func:`render_rows_volpath`, traced in packets (:mod:`gdlearn.integrators.path.packet_volume`)."""
+    run_rows(lambda counter, step: _rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, out, bad,
+                                                       counter, step), out.shape[0])
+
+
+@block(nogil=True)
+def _rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter, step):
+    sa = borrowed(sa)
+    stack = np.empty(STACK_SIZE, dtype=np.int32)
+    _, _, buf, items = surface_packet.new_buffers()
+    S, Q = volume_packet.new_buffers()
+    acc = np.zeros((out.shape[1], 3))
+    while True:
+        y0, y1 = next_rows(counter, step, out.shape[0])
+        if y0 == y1:
+            return
+        for y in range(y0, y1):
+            bad[y] = render_row_packet_volume(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items,
+                                              acc, stack)
+
+
 def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
     run_rows(lambda counter, step: _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out,
@@ -172,12 +196,19 @@ class PathTracer(ProgressiveIntegrator):
             s.mask |= TRANSPORT[transport]
         self.transport = transport
         super().__init__(s.scene, seed=seed, spp_per_pass=spp_per_pass)
-        can_pack = not s.media and surface_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
+        if s.media:
+            can_pack = volume_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
+        else:
+            can_pack = surface_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
         if packets and not can_pack:
-            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py: no media, no null "
-                             "BSDF, no environment, every effect the scene can show kept); fix: packets=None or False")
+            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py, packet_volume.py: "
+                             "no environment, every effect the scene can show kept, no transport split; without "
+                             "media, no null BSDF); fix: packets=None or False")
         self.packets = can_pack if packets is None else bool(packets) and can_pack
-        self.kernel = render_rows_volpath if s.media else (render_rows_packet if self.packets else render_rows_path)
+        if s.media:
+            self.kernel = render_rows_packet_volume if self.packets else render_rows_volpath
+        else:
+            self.kernel = render_rows_packet if self.packets else render_rows_path
 
     def _run(self, sample0, spp, out):
         s = self.setup

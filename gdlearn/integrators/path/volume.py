@@ -74,40 +74,58 @@ def roulette(beta, eta, depth, rr_depth, u):
 def shadow_transmittance(sa, p, ng, q, medium, stack):
     """Transmittance from p (surface normal ng, or zeros in a medium) to q, crossing null interfaces
     and the media between them; 0 if any non-null surface blocks the segment."""
-    d = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
-    o = offset_origin(p, ng, d) if (ng[0] != 0.0 or ng[1] != 0.0 or ng[2] != 0.0) else p
-    d = (q[0] - o[0], q[1] - o[1], q[2] - o[2])
-    dist = math.sqrt(dot(d, d))
-    if dist == 0.0:
+    o, d, remaining = shadow_start(p, ng, q)
+    if remaining < 0.0:
         return (1.0, 1.0, 1.0)
-    d = (d[0] / dist, d[1] / dist, d[2] / dist)
-    remaining = dist * (1.0 - SHADOW_EPS)
     tr = (1.0, 1.0, 1.0)
     for _ in range(MAX_SEGMENTS):
         # the traversal inlined: one call per shadow ray (this function) instead of two, each
         # passing the scene's arrays as dozens of scalars (benchmarks/README, pt speed)
         t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining,
                                            stack)
-        seg = remaining if prim < 0 else t
-        if medium >= 0:
-            sig = sa.media[medium]
-            x = transmittance((sig[0], sig[1], sig[2]), seg)
-            tr = (tr[0] * x[0], tr[1] * x[1], tr[2] * x[2])
-        if prim < 0:
-            return tr
-        if sa.materials[sa.prim_info[prim, INFO_MAT], MAT_TYPE] != NULL:
-            return (0.0, 0.0, 0.0)
-        hp, hng, hns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
-        medium = next_medium(sa.prim_info, prim, medium, d, hng)
-        o = offset_origin(hp, hng, d)
-        # aimed again at q from the pushed-off origin (as shadow_ray does for the first segment): the
-        # push moves o off the line p -> q by ~1e-7, so keeping d and "remaining -= t" let a short
-        # or grazing ray run past its SHADOW_EPS slack into q's own surface (an area emitter), which
-        # then counted as a blocker
-        d, remaining = _aim(o, q)
-        if remaining <= 0.0 or max3(tr) == 0.0:
+        done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v)
+        if done:
             return tr
     return tr
+
+
+@inlined
+def shadow_start(p, ng, q):
+    """The first segment (o, d, length) of the shadow ray from p (surface normal ng, or zeros in a
+    medium) to q; length -1 when p is q (nothing in between: transmittance 1)."""
+    d = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
+    o = offset_origin(p, ng, d) if (ng[0] != 0.0 or ng[1] != 0.0 or ng[2] != 0.0) else p
+    d = (q[0] - o[0], q[1] - o[1], q[2] - o[2])
+    dist = math.sqrt(dot(d, d))
+    if dist == 0.0:
+        return o, d, -1.0
+    d = (d[0] / dist, d[1] / dist, d[2] / dist)
+    return o, d, dist * (1.0 - SHADOW_EPS)
+
+
+@inlined
+def shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v):
+    """One traced segment of a shadow ray towards q (closest hit t, prim, u, v within ``remaining``
+    in ``medium``): (done, transmittance so far, and the next segment's o, d, length, medium)."""
+    seg = remaining if prim < 0 else t
+    if medium >= 0:
+        sig = sa.media[medium]
+        x = transmittance((sig[0], sig[1], sig[2]), seg)
+        tr = (tr[0] * x[0], tr[1] * x[1], tr[2] * x[2])
+    if prim < 0:
+        return True, tr, o, d, remaining, medium
+    if sa.materials[sa.prim_info[prim, INFO_MAT], MAT_TYPE] != NULL:
+        return True, (0.0, 0.0, 0.0), o, d, remaining, medium
+    hp, hng, hns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
+    medium = next_medium(sa.prim_info, prim, medium, d, hng)
+    o = offset_origin(hp, hng, d)
+    # aimed again at q from the pushed-off origin (as shadow_ray does for the first segment): the
+    # push moves o off the line p -> q by ~1e-7, so keeping d and "remaining -= t" let a short
+    # or grazing ray run past its SHADOW_EPS slack into q's own surface (an area emitter), which
+    # then counted as a blocker
+    d, remaining = _aim(o, q)
+    done = remaining <= 0.0 or max3(tr) == 0.0
+    return done, tr, o, d, remaining, medium
 
 
 @inlined
