@@ -86,9 +86,9 @@ def test_glossy_specular_spheres_and_spot_lights(name):
 
 
 def test_scenes_it_does_not_accept_render_one_path_at_a_time():
-    fog = load(ROOT / "scenes" / "fog-box.xml", res=8)                        # media (volpath)
+    # a restricted mask; media have their own packet tracer (tests/test_pt_packet_volume.py)
     glossy = load(ROOT / "scenes" / "glossy-box.xml", res=8)
-    for scene, kw in ((fog, {}), (cornell_box(res=8), {"effects": "diffuse-interreflection"}),
+    for scene, kw in ((cornell_box(res=8), {"effects": "diffuse-interreflection"}),
                       (glossy, {"effects": "emission,direct-lighting,diffuse-interreflection"})):
         assert not make("pt", scene, **kw).packets
         with pytest.raises(ValueError, match="packets"):
