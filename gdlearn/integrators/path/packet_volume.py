@@ -123,7 +123,9 @@ def _u(S, j, k):
     return S[(R_U + k) * PK + j]
 
 
-@leaf
+# not inlined: two call sites (medium and surface vertices) would each inline the emitter sample and
+# every BSDF's evaluation, a cold compile's seconds for no measurable speed
+@noalloc
 def _nee_setup(sa, S, Q, j, p, ng, prim, medium, a_of, wi_local, frame, mat, g, wi):
     """``volume.nee_volume`` up to its shadow ray: the emitter sample, the term's factors (the
     medium's phase function or the BSDF, MIS), the shadow ray's first segment and medium. ``a_of``:
@@ -262,6 +264,19 @@ def _shade(sa, S, Q, j, max_depth, rr_depth):
     _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth)
 
 
+@noalloc
+def _march_on(sa, o, d, remaining, q, medium, tr, stack):
+    """The rest of a shadow ray's march after a null interface (``volume.shadow_transmittance``'s
+    loop from its second segment): rare, so not inlined."""
+    for _ in range(MAX_SEGMENTS - 1):
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining,
+                                           stack)
+        done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v)
+        if done:
+            return tr
+    return tr
+
+
 @leaf
 def _shadow(sa, S, Q, j, stack):
     """Lane j's next-event term: its shadow ray's transmittance (the first segment traced with
@@ -278,12 +293,8 @@ def _shadow(sa, S, Q, j, stack):
         t = S[(R_SO + 6) * PK + j] if prim >= 0 else math.inf
         done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim,
                                                         S[S_U * PK + j], S[S_V * PK + j])
-        for _ in range(MAX_SEGMENTS - 1):
-            if done:
-                break
-            t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0,
-                                               remaining, stack)
-            done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v)
+        if not done:
+            tr = _march_on(sa, o, d, remaining, q, medium, tr, stack)
     if tr[0] == 0.0 and tr[1] == 0.0 and tr[2] == 0.0:
         return
     w_em = _get3(S, R_WEM, j)
