@@ -23,8 +23,7 @@ from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, _get3, 
                                              sum_items, write_row)
 from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
                                               D_MED_T, D_RR, dim)
-from gdlearn.integrators.path.volume import MAX_SEGMENTS, roulette, shadow_start, shadow_step
-from gdlearn.kernels.accel.bvh import closest_hit_inline
+from gdlearn.integrators.path.volume import MAX_SEGMENTS, roulette, shadow_march, shadow_start, shadow_step
 from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_PRIM, S_U, S_V
 from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf,
                                            bsdf_sample)
@@ -123,45 +122,44 @@ def _u(S, j, k):
     return S[(R_U + k) * PK + j]
 
 
-# not inlined: two call sites (medium and surface vertices) would each inline the emitter sample and
-# every BSDF's evaluation, a cold compile's seconds for no measurable speed
+# not inlined: two call sites (medium and surface vertices) would each inline the emitter sample, a
+# cold compile's seconds for no measurable speed
 @noalloc
-def _nee_setup(sa, S, Q, j, p, ng, prim, medium, a_of, wi_local, frame, mat, g, wi):
-    """``volume.nee_volume`` up to its shadow ray: the emitter sample, the term's factors (the
-    medium's phase function or the BSDF, MIS), the shadow ray's first segment and medium. ``a_of``:
-    the throughput the term is weighted by; ``frame``, ``mat`` for a surface vertex (prim >= 0), ``g``
-    and ``wi`` (world) for a medium vertex."""
+def _nee_setup(sa, S, Q, j, p, ng, prim, medium, a):
+    """``volume.nee_volume`` up to its shadow ray, at p (surface normal ng on ``prim``, or zeros and
+    -1 in a medium): the emitter sample, the shadow ray's first segment and medium, and ``a``, the
+    throughput the term is weighted by. Returns (em, dl, pdf_em, delta); em < 0: no term (the caller
+    then stores nothing more), else the caller stores the term's other factor with
+    :func:`_nee_factor`."""
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, _u(S, j, D_EM_SEL), _u(S, j, D_EM_U1),
         _u(S, j, D_EM_U2))
     if em < 0:
-        return
+        return em, dl, pdf_em, delta
     if prim >= 0:
         medium = next_medium(sa.prim_info, prim, medium, dl, ng)
-        s, t, n = frame
-        wo = to_local(dl, s, t, n)
-        f = bsdf_eval(mat, wi_local, wo)
-        k = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi_local, wo))
-        k *= 1.0                             # nee_class_share: every class is kept
-        _set3(S, R_A, j, (a_of[0] * f[0], a_of[1] * f[1], a_of[2] * f[2]))
-    else:
-        ph = hg_eval(g, dot(wi, dl))
-        mw = 1.0 if delta else power_heuristic(pdf_em, ph)
-        k = ph * mw
-        _set3(S, R_A, j, a_of)
-    S[R_K * PK + j] = k
+    _set3(S, R_A, j, a)
     _set3(S, R_WEM, j, w_em)
     _set3(S, R_Q, j, q)
     Q[Q_SMED * PK + j] = medium
     o, d, remaining = shadow_start(p, ng, q)
     if remaining < 0.0:                      # the light point is the vertex: transmittance 1
         Q[Q_NEE * PK + j] = 2
-        return
+        return em, dl, pdf_em, delta
     _set3(S, R_SO, j, o)
     _set3(S, R_SO + 3, j, d)
     S[(R_SO + 6) * PK + j] = remaining
     S[R_REM * PK + j] = remaining
     Q[Q_NEE * PK + j] = 1
+    return em, dl, pdf_em, delta
+
+
+@leaf
+def _nee_factor(S, j, f, k):
+    """The pending term's A becomes A f (the BSDF value; ``volume``'s beta f), and its MIS factor k."""
+    a = _get3(S, R_A, j)
+    _set3(S, R_A, j, (a[0] * f[0], a[1] * f[1], a[2] * f[2]))
+    S[R_K * PK + j] = k
 
 
 @leaf
@@ -174,7 +172,10 @@ def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
     p = (o[0] + ts * d[0], o[1] + ts * d[1], o[2] + ts * d[2])
     wi = (-d[0], -d[1], -d[2])
     beta = _get3(S, R_BETA, j)
-    _nee_setup(sa, S, Q, j, p, (0.0, 0.0, 0.0), -1, medium, beta, wi, (wi, wi, wi), sa.materials[0], g, wi)
+    em, dl, pdf_em, delta = _nee_setup(sa, S, Q, j, p, (0.0, 0.0, 0.0), -1, medium, beta)
+    if em >= 0:                             # the phase function's term, MIS-weighted
+        ph = hg_eval(g, dot(wi, dl))
+        S[R_K * PK + j] = ph * (1.0 if delta else power_heuristic(pdf_em, ph))
     d2, pdf = hg_sample(g, wi, _u(S, j, D_BSDF_U1), _u(S, j, D_BSDF_U2))
     if not pdf > 0.0:
         return
@@ -221,7 +222,11 @@ def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     s, tt = coordinate_system(ns)
     wi = to_local((-d[0], -d[1], -d[2]), s, tt, ns)
     if not bsdf_is_delta_only(mat):
-        _nee_setup(sa, S, Q, j, p, ng, prim, medium, beta, wi, (s, tt, ns), mat, 0.0, wi)
+        em, dl, pdf_em, delta = _nee_setup(sa, S, Q, j, p, ng, prim, medium, beta)
+        if em >= 0:                         # the BSDF's term, MIS-weighted (every class kept: share 1)
+            wo = to_local(dl, s, tt, ns)
+            k = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+            _nee_factor(S, j, bsdf_eval(mat, wi, wo), k)
     wo, weight, pdf, is_delta = bsdf_sample(mat, wi, _u(S, j, D_LOBE), _u(S, j, D_BSDF_U1), _u(S, j, D_BSDF_U2))
     if not pdf > 0.0:
         return
@@ -267,14 +272,8 @@ def _shade(sa, S, Q, j, max_depth, rr_depth):
 @noalloc
 def _march_on(sa, o, d, remaining, q, medium, tr, stack):
     """The rest of a shadow ray's march after a null interface (``volume.shadow_transmittance``'s
-    loop from its second segment): rare, so not inlined."""
-    for _ in range(MAX_SEGMENTS - 1):
-        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining,
-                                           stack)
-        done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v)
-        if done:
-            return tr
-    return tr
+    from its second segment): rare, so not inlined."""
+    return shadow_march(sa, o, d, remaining, q, medium, tr, MAX_SEGMENTS - 1, stack)
 
 
 @leaf

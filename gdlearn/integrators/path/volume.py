@@ -77,10 +77,16 @@ def shadow_transmittance(sa, p, ng, q, medium, stack):
     o, d, remaining = shadow_start(p, ng, q)
     if remaining < 0.0:
         return (1.0, 1.0, 1.0)
-    tr = (1.0, 1.0, 1.0)
-    for _ in range(MAX_SEGMENTS):
-        # the traversal inlined: one call per shadow ray (this function) instead of two, each
-        # passing the scene's arrays as dozens of scalars (benchmarks/README, pt speed)
+    return shadow_march(sa, o, d, remaining, q, medium, (1.0, 1.0, 1.0), MAX_SEGMENTS, stack)
+
+
+@inlined
+def shadow_march(sa, o, d, remaining, q, medium, tr, segments, stack):
+    """The transmittance ``tr`` carried along a shadow ray towards q from the segment (o, d,
+    ``remaining``) in ``medium`` on, at most ``segments`` segments (:func:`shadow_step` each)."""
+    for _ in range(segments):
+        # the traversal inlined: one call per shadow ray instead of two, each passing the scene's
+        # arrays as dozens of scalars (benchmarks/README, pt speed)
         t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining,
                                            stack)
         done, tr, o, d, remaining, medium = shadow_step(sa, o, d, remaining, q, medium, tr, t, prim, u, v)
