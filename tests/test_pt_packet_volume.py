@@ -6,23 +6,20 @@ same functions, random numbers and order of operations on its radiance, so any d
 (a next-event term added with the wrong throughput, a transmittance over the wrong segment, a null
 interface crossed twice, a random number of another segment).
 """
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from gdlearn.integrators import make
-from gdlearn.scene.load import load
+sys.path.insert(0, os.path.dirname(__file__))
+from test_pt_packet import _pair  # noqa: E402  (scalar image, packet image, their stats) of one pass
+
+from gdlearn.integrators import make  # noqa: E402
+from gdlearn.scene.load import load  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _pair(scene, seed=5, spp=3, pass_index=0, threads=1, **kw):
-    a = make("pt", scene, seed=seed, spp_per_pass=spp, threads=threads, packets=False, **kw)
-    b = make("pt", scene, seed=seed, spp_per_pass=spp, threads=threads, **kw)
-    assert b.packets and not a.packets
-    ra, rb = a.render_pass(pass_index), b.render_pass(pass_index)
-    return ra.images["primal"], rb.images["primal"], ra.stats, rb.stats
 
 
 @pytest.mark.parametrize("name", ["fog-box", "medium-cube", "spot-medium", "volume-caustic", "test/medium-room",
