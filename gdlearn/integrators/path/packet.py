@@ -324,7 +324,8 @@ def _finish(sa, S, Q, buf, nxt, nitems, items, seed):
     return nxt, busy
 
 
-@leaf
+# not inlined: called once per chunk of up to N_ITEMS paths, and gpt-replay's row calls it twice
+@noalloc
 def trace_items(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
     """The radiance of the camera paths of items 0 .. nitems-1 of the table ``items`` (film
     position, key, sample: :data:`IT_FX` ...) into ``buf[3 i : 3 i + 3]``, each path
