@@ -217,7 +217,7 @@ def build_scene(rows, types, shape_of, lo, hi):
     order = np.array([p for k in iorder for p in items[k][0]], dtype=np.int64)
     wide, children = _collapse(boxes, info)
     if len(wide) > CHILD_MASK:
-        raise ValueError(f"{len(wide)} BVH nodes: a child key holds at most {CHILD_MASK} (simd.CHILD_BITS)")
+        raise ValueError(f"{len(wide)} BVH nodes: a child key holds at most {CHILD_MASK} (bvh_build.CHILD_BITS)")
     row_of = {b: r for r, b in enumerate(wide)}
     node_info = np.zeros((len(wide), 5), dtype=np.int32)
     parts, off = [], 0

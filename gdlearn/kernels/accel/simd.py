@@ -164,11 +164,12 @@ def children8(typingctx, nodes, off, o, inv, tmin, tmax, keys, sp):
         key = builder.and_(builder.bitcast(lo, vi), ir.Constant(vi, [~CHILD_MASK] * W))
         key = builder.or_(key, builder.fptosi(row[6], vi))
         kbase = context.make_array(signature.args[6])(context, builder, value=a_keys).data
-        _store(builder, builder.select(ok, key, ir.Constant(vi, [-1] * W)), kbase, builder.add(a_sp, i64(1)), vi)
+        entered = builder.select(ok, key, ir.Constant(vi, [-1] * W))
+        _store(builder, entered, kbase, builder.add(a_sp, i64(1)), vi)
         reduce = lambda op: cgutils.get_or_insert_function(  # noqa: E731
             builder.module, ir.FunctionType(i64, [vi]), f"llvm.vector.reduce.{op}.v8i64")
         # unsigned: a miss's -1 is the largest key for the minimum, 0 the smallest for the maximum
-        near = builder.call(reduce("umin"), [builder.select(ok, key, ir.Constant(vi, [-1] * W))])
+        near = builder.call(reduce("umin"), [entered])
         far = builder.call(reduce("umax"), [builder.select(ok, key, ir.Constant(vi, [0] * W))])
         ctpop = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(8), [ir.IntType(8)]),
                                                "llvm.ctpop.i8")
