@@ -221,10 +221,8 @@ class ReplayGPT(ProgressiveIntegrator):
         self.shift_weights = (wf, wb)
         self.shift_rr, self.shift_rr_min = float(shift_rr), float(shift_rr_min)
         can_pack = not st.media and surface_packet.eligible(st.sa, st.mask, st.max_depth, st.plan.possible_mask)
-        if packets and not can_pack:
-            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py: no media, no null "
-                             "BSDF, no environment, every effect the scene can show kept); fix: packets=None or False")
-        self.packets = can_pack if packets is None else bool(packets) and can_pack
+        self.packets = surface_packet.use_packets(packets, can_pack, (
+            "integrators/path/packet.py: no media, no null BSDF, no environment, every effect the scene can show kept"))
         self.replay_kernel = replay_rows_volpath if st.media else replay_rows_path
 
     def trace(self, sample0: int, spp: int, diagnose: bool = False):

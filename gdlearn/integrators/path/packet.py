@@ -86,6 +86,14 @@ def eligible(sa, mask, max_depth, possible) -> bool:
                 and len(sa.emitters) > 0 and not np.any(sa.materials[:, MAT_TYPE] == NULL))
 
 
+def use_packets(requested, eligible_here: bool, rule: str) -> bool:
+    """The ``packets`` option of ``pt`` and ``gpt-replay``: None traces packets where the scene is
+    eligible, False never, True insists (ValueError naming ``rule``, what eligibility asks)."""
+    if requested and not eligible_here:
+        raise ValueError(f"this scene cannot be traced in packets ({rule}); fix: packets=None or False")
+    return eligible_here if requested is None else bool(requested) and eligible_here
+
+
 #: columns of the item table: film position x, y (raster), the pixel key and sample index whose
 #: random numbers the path uses (for random-sequence replay, another pixel's than the film position's)
 IT_FX, IT_FY, IT_KEY, IT_S = range(4)

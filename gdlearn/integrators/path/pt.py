@@ -201,11 +201,9 @@ class PathTracer(ProgressiveIntegrator):
             can_pack = volume_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
         else:
             can_pack = surface_packet.eligible(s.sa, s.mask, s.max_depth, s.plan.possible_mask)
-        if packets and not can_pack:
-            raise ValueError("this scene cannot be traced in packets (integrators/path/packet.py, packet_volume.py: "
-                             "no environment, every effect the scene can show kept, no transport split; without "
-                             "media, no null BSDF); fix: packets=None or False")
-        self.packets = can_pack if packets is None else bool(packets) and can_pack
+        self.packets = surface_packet.use_packets(packets, can_pack, (
+            "integrators/path/packet.py, packet_volume.py: no environment, every effect the scene can show kept, no "
+            "transport split; without media, no null BSDF"))
         if s.media:
             self.kernel = render_rows_packet_volume if self.packets else render_rows_volpath
         else:
