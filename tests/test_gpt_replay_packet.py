@@ -45,12 +45,28 @@ def test_shift_roulette_and_more_samples_than_a_chunk():
     assert np.array_equal(oa, ob) and ca == cb
 
 
-def test_diagnostics_and_media_trace_one_path_at_a_time():
+@pytest.mark.parametrize("name", ["fog-box", "spot-medium", "volume-caustic"])
+def test_media_bit_for_bit(name):
+    """With media the offsets go through the volume packet tracer (packet_volume): the fog box (the
+    camera in the medium), a medium behind null interfaces lit by a spot light, a glass sphere's
+    volume caustic."""
+    scene = load(ROOT / "scenes" / f"{name}.xml", res=10)
+    oa, ob, ca, cb = _pair(scene, spp=2, sample0=1, threads=2)
+    assert np.abs(oa[1:]).sum() > 0 and np.array_equal(oa, ob) and ca == cb
+
+
+def test_media_shift_roulette_over_chunks():
+    oa, ob, ca, cb = _pair(load(ROOT / "scenes" / "fog-box.xml", res=3), spp=1100, shift_rr=0.5, shift_rr_min=0.2,
+                           threads=1)
+    assert ca["shifts_rr_skipped"] > 0 and np.array_equal(oa, ob) and ca == cb
+
+
+def test_diagnostics_trace_one_path_at_a_time_and_ineligible_scenes_refuse_packets():
     integ = make("gpt-replay", cornell_box(res=6), seed=0)
     assert integ.packets
     maps = integ.decorrelation(spp=2)                  # the one-path kernel, which fills the diagnostics
     assert maps["other_surface"].shape == (6, 6)
     fog = load(ROOT / "scenes" / "fog-box.xml", res=6)
-    assert not make("gpt-replay", fog, seed=0).packets
+    assert not make("gpt-replay", fog, seed=0, effects="single-scattering").packets
     with pytest.raises(ValueError, match="packets"):
-        make("gpt-replay", fog, seed=0, packets=True)
+        make("gpt-replay", fog, seed=0, packets=True, effects="single-scattering")

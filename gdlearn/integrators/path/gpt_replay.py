@@ -34,7 +34,8 @@ from gdlearn.kernels.geometry import INFO_SHAPE
 from gdlearn.kernels.rng import rand
 from gdlearn.integrators.path.surface import radiance_path
 from gdlearn.integrators.path import packet as surface_packet
-from gdlearn.integrators.path.gpt_replay_packet import replay_rows_packet
+from gdlearn.integrators.path import packet_volume as volume_packet
+from gdlearn.integrators.path.gpt_replay_packet import replay_rows_packet, replay_rows_packet_volume
 from gdlearn.integrators.path.volume import radiance_volpath
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.integrators.gradients import combine_gradients
@@ -193,7 +194,8 @@ class ReplayGPT(ProgressiveIntegrator):
     Options as :class:`~gdlearn.integrators.setup.SceneSetup`, plus:
 
     * ``packets``: as ``pt``'s (:mod:`gdlearn.integrators.path.gpt_replay_packet`: the same buffers
-      bit for bit where :func:`gdlearn.integrators.path.packet.eligible` accepts the scene); the
+      bit for bit where :func:`gdlearn.integrators.path.packet.eligible` or, with media,
+      :func:`gdlearn.integrators.path.packet_volume.eligible` accepts the scene); the
       decorrelation diagnostics always trace one path at a time.
 
     * ``shift_weights`` (forward, backward): Eq. 16's constant weights; they must sum to 1 (any
@@ -220,10 +222,13 @@ class ReplayGPT(ProgressiveIntegrator):
                              "in (0, 1] (a zero floor would bias gradients of black base paths)")
         self.shift_weights = (wf, wb)
         self.shift_rr, self.shift_rr_min = float(shift_rr), float(shift_rr_min)
-        can_pack = not st.media and surface_packet.eligible(st.sa, st.mask, st.max_depth, st.plan.possible_mask)
+        tracer = volume_packet if st.media else surface_packet
+        can_pack = tracer.eligible(st.sa, st.mask, st.max_depth, st.plan.possible_mask)
         self.packets = surface_packet.use_packets(packets, can_pack, (
-            "integrators/path/packet.py: no media, no null BSDF, no environment, every effect the scene can show kept"))
+            "integrators/path/packet.py, packet_volume.py: no environment, every effect the scene can show kept, "
+            "no null BSDF without media"))
         self.replay_kernel = replay_rows_volpath if st.media else replay_rows_path
+        self.packet_kernel = replay_rows_packet_volume if st.media else replay_rows_packet
 
     def trace(self, sample0: int, spp: int, diagnose: bool = False):
         """Run the kernel once: (out (5, H, W, 3), counts dict, diag (H, W, 4) or None)."""
@@ -232,7 +237,7 @@ class ReplayGPT(ProgressiveIntegrator):
         out = np.zeros((5, h, w, 3))
         counts = np.zeros((h, 4), dtype=np.int64)
         diag = np.zeros((h, w, 4) if diagnose else (1, 1, 4))
-        kernel = replay_rows_packet if self.packets and not diagnose else self.replay_kernel
+        kernel = self.packet_kernel if self.packets and not diagnose else self.replay_kernel
         with st.parallel(h):
             kernel(st.sa, self.seed, sample0, spp, st.max_depth, st.rr_depth, st.mask, st.threshold,
                    self.shift_rr, self.shift_rr_min, out, counts, diag, diagnose)

@@ -1,5 +1,6 @@
 """gpt-replay's sampling loop on the packet tracer: Algorithm 1 of Hua et al. 2019 (the STAR,
-Sec. 2.3) for the scenes :func:`gdlearn.integrators.path.packet.eligible` accepts.
+Sec. 2.3) for the scenes :func:`gdlearn.integrators.path.packet.eligible` accepts, and with media
+for those :func:`gdlearn.integrators.path.packet_volume.eligible` accepts.
 
 The one-path kernel (:func:`gdlearn.integrators.path.gpt_replay.replay_rows_path`) traces, per
 sample, the base path and then its surviving offsets, one path at a time. Here a row's samples go
@@ -7,14 +8,16 @@ through the packet tracer in two waves per chunk: first the base paths (``pt``'s
 offsets of those bases -- film position moved by one pixel, the base pixel's key and sample
 (:mod:`gdlearn.shifts.replay`) -- that survive the shift roulette, which needs the base's value
 (:func:`gdlearn.shifts.replay.shift_q`, the same random numbers). Every path is the
-packet tracer's, so ``radiance_path``'s bit for bit, and every sum runs over the samples in their
+packet tracer's, so ``radiance_path``'s (``radiance_volpath``'s) bit for bit, and every sum runs over the samples in their
 order: the five buffers and the counters equal the one-path kernel's exactly
 (tests/test_gpt_replay_packet.py).
 """
 import numpy as np
 
+from gdlearn.integrators.path import packet_volume
 from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS, fill_pixel_items, new_buffers,
                                              trace_items)
+from gdlearn.integrators.path.packet_volume import trace_items_volume
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.kernels.jit import block, leaf, noalloc
@@ -30,15 +33,27 @@ def replay_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, thresh
     """:func:`gdlearn.integrators.path.gpt_replay.replay_rows_path`'s buffers and counters, traced in
     packets on threads (``want_diag`` is not supported: the caller uses the one-path kernel)."""
     run_rows(lambda counter, step: _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out,
-                                         counts, counter, step), out.shape[1])
+                                         counts, counter, step, None), out.shape[1])
+
+
+def replay_rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
+                              out, counts, diag, want_diag):
+    """As :func:`replay_rows_packet` with media: :func:`gdlearn.integrators.path.gpt_replay.replay_rows_volpath`'s
+    buffers and counters."""
+    run_rows(lambda counter, step: _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out,
+                                         counts, counter, step, True), out.shape[1])
 
 
 @block(nogil=True)
-def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts, counter, step):
+def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts, counter, step, volume):
+    """``volume`` None: the surface tracer; True: the volume tracer. numba prunes the ``is None``
+    branches of each specialisation before typing, so each kernel holds one tracer."""
     sa = borrowed(sa)
     h, w = out.shape[1], out.shape[2]
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     S, Q, buf, items = new_buffers()
+    if volume is not None:
+        S, Q = packet_volume.new_buffers()
     obuf, oitems = np.zeros(3 * N_ITEMS), np.zeros((N_ITEMS, 4))
     oref = np.zeros((N_ITEMS, 2), dtype=np.int64)          # an offset's base item and shift k
     oq = np.zeros(N_ITEMS)                                  # its survival probability
@@ -49,7 +64,15 @@ def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out
             return
         for y in range(y0, y1):
             _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts[y], S, Q, buf,
-                 items, obuf, oitems, oref, oq, acc, stack)
+                 items, obuf, oitems, oref, oq, acc, stack, volume)
+
+
+@leaf
+def _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, volume):
+    if volume is None:
+        trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
+    else:
+        trace_items_volume(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
 
 
 @leaf
@@ -84,16 +107,16 @@ def _offsets(items, m, i0, y, w, h, spp, seed, buf, rr_threshold, rr_min, cnt, a
 
 @noalloc
 def _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, cnt, S, Q, buf, items, obuf,
-         oitems, oref, oq, acc, stack):
+         oitems, oref, oq, acc, stack, volume):
     h, w = out.shape[1], out.shape[2]
     n = w * spp
     acc[:, :, :] = 0.0
     for i0 in range(0, n, CHUNK):
         m = min(CHUNK, n - i0)
         fill_pixel_items(items, i0, m, y, w, spp, seed, sample0)
-        trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
+        _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, volume)
         no = _offsets(items, m, i0, y, w, h, spp, seed, buf, rr_threshold, rr_min, cnt, acc, oitems, oref, oq)
-        trace_items(sa, oitems, no, seed, max_depth, rr_depth, S, Q, obuf, stack)
+        _trace(sa, oitems, no, seed, max_depth, rr_depth, S, Q, obuf, stack, volume)
         for r in range(no):
             if not _finite(obuf, r):
                 cnt[3] += 1
