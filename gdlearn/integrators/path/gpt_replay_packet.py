@@ -20,7 +20,7 @@ from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS
 from gdlearn.integrators.path.packet_volume import trace_items_volume
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrowed
-from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.jit import block, ir_inline, leaf
 from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.shifts.replay import offset_film_position, shift_q
 
@@ -105,7 +105,7 @@ def _offsets(items, m, i0, y, w, h, spp, seed, buf, rr_threshold, rr_min, cnt, a
     return no
 
 
-@noalloc
+@ir_inline
 def _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, cnt, S, Q, buf, items, obuf,
          oitems, oref, oq, acc, stack, volume):
     h, w = out.shape[1], out.shape[2]

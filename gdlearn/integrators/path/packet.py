@@ -42,7 +42,7 @@ from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_h
 from gdlearn.kernels.scene_query import shadow_ray
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
-from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
 
 # float rows (after the traversal's): the ray set of the next closest hit, the shadow ray set,
 # throughput, radiance, beta * next-event term waiting for its shadow ray, previous vertex, its pdf, eta
@@ -138,7 +138,7 @@ def _start(sa, S, Q, j, item, items, seed):
     Q[Q_ITEM * PK + j] = item
 
 
-@leaf
+@ir_inline
 def _nee(sa, S, Q, j, p, ng, frame, wi, mat, beta):
     """``surface_path.nee_surface`` for lane j up to its visibility test: the term times beta waits
     in R_C, its shadow ray in R_SO (tmax -1: no ray to test, the term counts as visible)."""
@@ -192,7 +192,7 @@ def _diffuse_sample(mat, wi, wo):
     return (wo[0], wo[1], -wo[2] if flip else wo[2]), w, pdf, False
 
 
-@leaf
+@ir_inline
 def _emission(sa, S, Q, j, prim, p, ns, d, beta):
     """Emission seen by the lane's segment, MIS-weighted against the next-event estimate before it."""
     em = sa.prim_info[prim, INFO_EMITTER]
@@ -393,7 +393,7 @@ def write_row(out, y, acc, spp):
             out[y, x, c] = acc[x, c] * inv
 
 
-@noalloc
+@ir_inline
 def render_row_packet(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items, acc, stack):
     """Row y of ``pt._rows_path``'s image (the mean of samples sample0 .. sample0+spp-1 per pixel
     into out[y]), traced in packets; returns the number of non-finite samples dropped. The row's

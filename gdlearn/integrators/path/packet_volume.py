@@ -29,7 +29,7 @@ from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_on
                                            bsdf_sample)
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
 from gdlearn.kernels.media.boundary import next_medium
 from gdlearn.kernels.media.medium import medium_params, sample_distance
@@ -162,7 +162,7 @@ def _nee_factor(S, j, f, k):
     S[R_K * PK + j] = k
 
 
-@leaf
+@ir_inline
 def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
     """A scattering event at distance ts: next-event estimate, phase sampling, roulette."""
     depth = Q[Q_DEPTH * PK + j] + 1
@@ -197,7 +197,7 @@ def _next_ray(S, Q, j, o, d, beta):
     Q[Q_ALIVE * PK + j] = 1
 
 
-@leaf
+@ir_inline
 def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     """The surface reached: emission, a null interface passed, or next-event estimate and BSDF sample."""
     p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, S[S_U * PK + j], S[S_V * PK + j])
@@ -343,7 +343,7 @@ def trace_items_volume(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, 
         nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, items, seed)
 
 
-@noalloc
+@ir_inline
 def render_row_packet_volume(sa, y, seed, sample0, spp, max_depth, rr_depth, out, S, Q, buf, items, acc, stack):
     """Row y of ``pt._rows_volpath``'s image, traced in packets
     (:func:`gdlearn.integrators.path.packet.render_row_packet` with ``radiance_volpath``'s paths)."""
