@@ -93,9 +93,11 @@ def _recipe(**options):
 
 block = _recipe()
 inlined = _recipe(forceinline=True)
+#: :func:`inlined`'s options, for an ``overload`` whose body numba picks by argument type
+INLINED_OPTIONS = dict({k: v for k, v in _BASE.items() if k != "nopython"}, forceinline=True)
 leaf = _recipe(forceinline=True, _nrt=False)
 noalloc = _recipe(_nrt=False)
 ir_inline = _recipe(inline="always")
 rows = _recipe(parallel=True)
 
-__all__ = ["block", "inlined", "leaf", "noalloc", "ir_inline", "rows"]
+__all__ = ["INLINED_OPTIONS", "block", "inlined", "leaf", "noalloc", "ir_inline", "rows"]
