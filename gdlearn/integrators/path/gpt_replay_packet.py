@@ -7,9 +7,9 @@ sample, the base path and then its surviving offsets, one path at a time. Here a
 through the packet tracer in two waves per chunk: first the base paths (``pt``'s items), then the
 offsets of those bases -- film position moved by one pixel, the base pixel's key and sample
 (:mod:`gdlearn.shifts.replay`) -- that survive the shift roulette, which needs the base's value
-(:func:`gdlearn.shifts.replay.shift_q`, the same random numbers). Every path is the
-packet tracer's, so ``radiance_path``'s (``radiance_volpath``'s) bit for bit, and every sum runs over the samples in their
-order: the five buffers and the counters equal the one-path kernel's exactly
+(:func:`gdlearn.shifts.replay.shift_q`, the same random numbers). Every path is the packet
+tracer's, so ``radiance_path``'s (``radiance_volpath``'s) bit for bit, and every sum runs over the
+samples in their order: the five buffers and the counters equal the one-path kernel's exactly
 (tests/test_gpt_replay_packet.py).
 """
 import numpy as np

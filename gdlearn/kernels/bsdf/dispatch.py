@@ -28,6 +28,7 @@ quarter of ``pt``'s cold compile on the fog box. A writable table (any other sce
 import math
 
 import numpy as np
+from numba.extending import overload
 
 
 from gdlearn.kernels import layout as L
@@ -39,8 +40,6 @@ from gdlearn.kernels.bsdf.diffuse import diffuse_eval, diffuse_pdf, diffuse_samp
 from gdlearn.kernels.bsdf.plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plastic_pdf, plastic_sample,
                                           prepare_plastic, roughplastic_coat_fraction, roughplastic_eval,
                                           roughplastic_pdf, roughplastic_sample, roughplastic_spec_prob)
-from numba.extending import overload
-
 from gdlearn.kernels.jit import INLINED_OPTIONS, block, inlined
 
 ZERO3 = (0.0, 0.0, 0.0)
