@@ -60,7 +60,7 @@ from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
 from gdlearn.integrators.path.gpt_volume.mixed import shift_free_mixed
 from gdlearn.integrators.path.accumulate import add_sample, finite_sample, store_means
-from gdlearn.kernels.jit import block, leaf, noalloc
+from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
 from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM, VB_SURFACE, BaseVertex, NextVertex, PathRng, Pixel
 
@@ -91,7 +91,7 @@ def _flight(sa, of, oi, k, nx, tau, lp_b, cfg, stack):
     return True
 
 
-@noalloc
+@ir_inline
 def _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
     """Shift the segment x_i -> x_{i+1} of a not yet reconnected offset: direction, then flight
     (``bv``, ``nx``: :class:`~gdlearn.integrators.path.params.BaseVertex` x_i, ``NextVertex`` x_{i+1}; the
@@ -136,7 +136,7 @@ def _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
     return ok
 
 
-@noalloc
+@ir_inline
 def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, stack):
     """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``nx.ev`` at ``nx.p``).
     ``bv``: the base vertex x_i the segment leaves, ``nx`` the vertex x_{i+1} it reached
@@ -161,7 +161,7 @@ def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, s
     push_medium_vertex(oi)
 
 
-@noalloc
+@ir_inline
 def _emission(sa, nx, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, summ, cfg):
     """The emitter-hit technique at the base's surface hit / escape ``nx`` (volpath's arithmetic, so L is
     pt's bit for bit) and its pairs with every offset's own hit."""
