@@ -33,7 +33,7 @@ def replay_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, thresh
     """:func:`gdlearn.integrators.path.gpt_replay.replay_rows_path`'s buffers and counters, traced in
     packets on threads (``want_diag`` is not supported: the caller uses the one-path kernel)."""
     run_rows(lambda counter, step: _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out,
-                                         counts, counter, step, None), out.shape[1])
+                                         counts, counter, step, True, None), out.shape[1])
 
 
 def replay_rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
@@ -41,13 +41,15 @@ def replay_rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, mask,
     """As :func:`replay_rows_packet` with media: :func:`gdlearn.integrators.path.gpt_replay.replay_rows_volpath`'s
     buffers and counters."""
     run_rows(lambda counter, step: _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out,
-                                         counts, counter, step, True), out.shape[1])
+                                         counts, counter, step, None, True), out.shape[1])
 
 
 @block(nogil=True)
-def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts, counter, step, volume):
-    """``volume`` None: the surface tracer; True: the volume tracer. numba prunes the ``is None``
-    branches of each specialisation before typing, so each kernel holds one tracer."""
+def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts, counter, step, surface,
+          volume):
+    """(surface, volume) = (True, None): the surface tracer; (None, True): the volume tracer. numba
+    prunes a branch before typing only where it tests a *None* argument (True is an unknown bool),
+    so each tracer hides behind ``if its_flag is not None`` and each kernel holds one tracer."""
     sa = borrowed(sa)
     h, w = out.shape[1], out.shape[2]
     stack = np.empty(STACK_SIZE, dtype=np.int32)
@@ -64,14 +66,14 @@ def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out
             return
         for y in range(y0, y1):
             _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, counts[y], S, Q, buf,
-                 items, obuf, oitems, oref, oq, acc, stack, volume)
+                 items, obuf, oitems, oref, oq, acc, stack, surface, volume)
 
 
 @leaf
-def _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, volume):
-    if volume is None:
+def _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, surface, volume):
+    if surface is not None:
         trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
-    else:
+    if volume is not None:
         trace_items_volume(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)
 
 
@@ -107,16 +109,16 @@ def _offsets(items, m, i0, y, w, h, spp, seed, buf, rr_threshold, rr_min, cnt, a
 
 @ir_inline
 def _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out, cnt, S, Q, buf, items, obuf,
-         oitems, oref, oq, acc, stack, volume):
+         oitems, oref, oq, acc, stack, surface, volume):
     h, w = out.shape[1], out.shape[2]
     n = w * spp
     acc[:, :, :] = 0.0
     for i0 in range(0, n, CHUNK):
         m = min(CHUNK, n - i0)
         fill_pixel_items(items, i0, m, y, w, spp, seed, sample0)
-        _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, volume)
+        _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, surface, volume)
         no = _offsets(items, m, i0, y, w, h, spp, seed, buf, rr_threshold, rr_min, cnt, acc, oitems, oref, oq)
-        _trace(sa, oitems, no, seed, max_depth, rr_depth, S, Q, obuf, stack, volume)
+        _trace(sa, oitems, no, seed, max_depth, rr_depth, S, Q, obuf, stack, surface, volume)
         for r in range(no):
             if not _finite(obuf, r):
                 cnt[3] += 1
