@@ -33,6 +33,7 @@ from gdlearn.scene.load import load
 CAUSTIC = glass.Ball(np.array([0.0, 0.55, 0.0]), 0.35, 1.5)    # the ball of scenes/volume-caustic.xml
 SIGMA_T, BLOCK_TOP = 0.35, -0.44 + 0.55                   # its fog and the fog block's top face (y)
 R_KERNEL = 10.0                                           # only the map decides (test_gpm_manifold.py)
+EXACT = ((0.0, 0.0, 0.0), 0.0)                            # the walk's relax argument: converged, reversible
 
 
 def _cone_photons(g, lp, stack):
@@ -110,10 +111,10 @@ def test_volume_walk_against_an_independent_solver(cone):
         if chain is None or b_off[1] > BLOCK_TOP - 0.01:
             continue
         m1, m2 = chain
-        st_f, f3_f, pp_f, _ = manifold_volume_photon(sa, lp, g.mtab, v, tuple(b_off), edge, R_KERNEL, stack)
+        st_f, f3_f, pp_f, _ = manifold_volume_photon(sa, lp, g.mtab, v, tuple(b_off), edge, R_KERNEL, stack, EXACT)
         off = _offset_light_path(lp, v, q, q2, yb, m1, m2, b_off)
         st_r, f3_r, pp_r, _ = manifold_volume_photon(sa, off, g.mtab, v, tuple(ys), base_edge(sa, off, v, stack),
-                                                     R_KERNEL, stack)
+                                                     R_KERNEL, stack, EXACT)
         ok_f, ok_r = st_f == OK, st_r == OK
         counts["both" if ok_f and ok_r else "one way" if ok_f != ok_r else "neither"] += 1
         if ok_f and ok_r:
@@ -167,3 +168,34 @@ def test_gradients_unbiased_on_the_volume_caustic_per_pass(name, kw):
             t = m[where] / se[where]
             assert (t ** 2).mean() < bound, f"{name} {axis}: mean t^2 {(t ** 2).mean():.2f} over {t.size} pixels"
             assert np.abs(t).max() < 5.5, f"{name} {axis}: max |t| {np.abs(t).max():.1f}"
+
+
+def test_relaxed_walk_is_consistent(cone):
+    """The relaxed walk (Gruson et al. 2018 Sec. 6.1) against the exact one on 300 photons of the cone,
+    each moved by up to 1 cm: at every acceptance radius r it completes each shift the exact walk
+    completes (it only drops the walk's last steps and the walk back), and where both complete, the
+    offset's power and density ratios differ by a median that falls with r and vanishes with it:
+    measured 0.28 % at r = 1 cm, 0.10 % at 1 mm, 0.0045 % at 0.1 mm (asserted: falling, the last
+    under a tenth of the one before and under 0.01 %). The largest differences, up to 50 % at
+    r = 1 cm, belong to photons near the ball's focus, where the chain's Jacobian changes fastest."""
+    g, lp = cone
+    sa, stack = g.setup.sa, np.empty(STACK_SIZE, np.int32)
+    rng = np.random.default_rng(3)
+    radii = (1e-2, 1e-3, 1e-4)
+    diffs = {r: [] for r in radii}
+    n = n_exact = 0
+    for v, _, _, _, edge in _cone_photons(g, lp, stack):
+        b_off = tuple(lp.pos[v] + rng.uniform(-0.01, 0.01, 3))
+        st_e, f3_e, pp_e, _ = manifold_volume_photon(sa, lp, g.mtab, v, b_off, edge, R_KERNEL, stack, EXACT)
+        n_exact += st_e == OK
+        for r in radii:
+            st, f3, pp, _ = manifold_volume_photon(sa, lp, g.mtab, v, b_off, edge, R_KERNEL, stack, (b_off, r))
+            if st_e == OK:
+                assert st == OK, (v, r)
+                diffs[r].append(max(abs(pp / pp_e - 1.0), np.max(np.abs(np.array(f3) / np.array(f3_e) - 1.0))))
+        n += 1
+        if n == 300:
+            break
+    assert n == 300 and n_exact > 200, n_exact
+    med = [float(np.median(diffs[r])) for r in radii]
+    assert med[0] > med[1] > 10.0 * med[2] and med[2] < 1e-4, med

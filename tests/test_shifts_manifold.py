@@ -304,6 +304,20 @@ def _sensitivity(sc, x_b, X, x_c):
     return targets, S
 
 
+def moved_chains(name, seed, n):
+    """``n`` configurations of scene ``name``, each with its end moved by a pixel-sized step (numpy's
+    chains, :func:`_moved_end`): (scene, [(x_b, X, x_c, X', x_c', targets, S)]), S = A^-1 B at X."""
+    rng = np.random.default_rng(seed)
+    sc, cfgs = _configs(name, rng, n)
+    out = []
+    for x_b, x1, _ in cfgs:
+        moved = _moved_end(sc, x_b, x1, rng.normal(size=2) * 0.02)
+        if moved is not None:
+            X, x_c, Xt, x_ct = moved
+            out.append((x_b, X, x_c, Xt, x_ct) + _sensitivity(sc, x_b, X, x_c))
+    return sc, out
+
+
 @pytest.mark.parametrize("name", list(SCENES))
 def test_predicted_start_is_first_order(name):
     """M.predicted_start moves the chain by -A^-1 B times the endpoint's move (the implicit function
@@ -337,21 +351,15 @@ def test_predicted_walk_finds_the_traced_chain_in_fewer_steps(name):
     """The walk from the predicted start (M.predicted_walk) reaches the chain the numpy tracer finds
     for a pixel-sized move of the endpoint (1e-9: the walk converges to |c| < 1e-12), in no more
     Newton steps than the walk from the base chain, and in fewer over all configurations."""
-    rng = np.random.default_rng(17 + sum(map(ord, name)))
-    sc, cfgs = _configs(name, rng, 10)
+    sc, chains = moved_chains(name, 17 + sum(map(ord, name)), 10)
     steps_pred = steps_plain = 0
-    for x_b, x1, _ in cfgs:
-        moved = _moved_end(sc, x_b, x1, rng.normal(size=2) * 0.02)
-        if moved is None:
-            continue
-        X, x_c, Xt, x_ct = moved
-        targets, S = _sensitivity(sc, x_b, X, x_c)
+    for x_b, X, x_c, Xt, x_ct, targets, S in chains:
         Xo = np.empty_like(X)
         ok, it, _ = M.predicted_walk(T(x_b), X, T(x_c), T(sc.end.normal(x_c)), T(x_ct), S, sc.rows, sc.etas,
-                                     sc.refract, targets, sc.k, Xo)
+                                     sc.refract, targets, sc.k, Xo, None)
         Xw = X.copy()
         ok_w, it_w, _ = M.manifold_walk(T(x_b), T(x_ct), Xw, sc.rows, sc.etas, sc.refract, targets, sc.k,
-                                        M.MAX_ITER, M.MAX_HALVINGS, M.TOL)
+                                        M.MAX_ITER, M.MAX_HALVINGS, M.TOL, None)
         if not ok_w:
             continue
         assert ok and np.allclose(Xo, Xt, atol=1e-9), name

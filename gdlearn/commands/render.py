@@ -33,7 +33,8 @@ PHOTON_OPTIONS = {"--photons": ("photons_per_pass", PHOTON_INTEGRATORS), "--alph
                   "--neighbors": ("neighbors", ("vpm", "bre", "gvpm", "gbre")),
                   "--transport": ("transport", ("pt", "vpm", "bre", "gvpm", "gbre")),
                   "--samples": ("samples", ("vpm", "gvpm")),
-                  "--kernel": ("kernel", ("bre", "gbre")), "--radii": ("radii", ("vpm", "bre"))}
+                  "--kernel": ("kernel", ("bre", "gbre")), "--radii": ("radii", ("vpm", "bre")),
+                  "--walk": ("walk", ("gvpm", "gbre"))}
 
 
 def add_parser(subparsers) -> None:
@@ -92,6 +93,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--radii", choices=("fixed", "knn", "variable"), default=None,
                    help="bre: photon radii fixed (default), k-NN, or variable kernels (Jarosz et al. 2008); "
                         "vpm: progressive per-pixel radii (fixed, the default) or a k-NN radius at each sample")
+    p.add_argument("--walk", choices=("relaxed", "exact"), default=None,
+                   help="gvpm/gbre: the manifold walk of volume photons through specular chains, exact (converged "
+                        "and reversible; the default) or relaxed (accepted inside the offset kernel, Gruson et al. "
+                        "2018 Sec. 6.1: biased, consistent)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -15,7 +15,9 @@ photon's chain, :func:`predicted_walk`), from the chain's first-order prediction
 takes the Newton step dX = -A^-1 C, A = dC/dX; a step that leaves a surface, flips a reflection /
 refraction side or does not reduce |C| is rejected and halved (step halving), at most
 ``max_halvings`` times. The walk stops when max |c_j| < ``tol`` or after ``max_iter`` iterations
-(default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and reports failure otherwise.
+(default 5, the GPM and volumetric papers' choice; Mitsuba uses 20) and reports failure otherwise;
+a relaxed walk also stops at the first iterate whose traced light path ends in the offset photon's
+kernel (Gruson et al. 2018's relaxed acceptance, :mod:`gdlearn.shifts.specular_trace`).
 An unreachable target (the solution is off a finite surface, needs total internal reflection, or
 is not found in the budget) is a failure flag, never an exception.
 
@@ -41,22 +43,14 @@ import math
 
 import numpy as np
 
-
 from gdlearn.kernels import vec
 from gdlearn.shifts.halfvector import half_vector
-from gdlearn.kernels.jit import block, inlined, ir_inline
+from gdlearn.kernels.jit import block, inlined
 
-# --- shape rows ---------------------------------------------------------------------------------
-SHAPE_PLANE = 0
-SHAPE_SPHERE = 1
-SH_TYPE = 0
-SH_P = 1        # 3: plane point / sphere centre
-SH_N = 4        # 3: plane normal (outside, for eta = int/ext)
-SH_U = 7        # 3: plane tangent axis 1 (unit)
-SH_V = 10       # 3: plane tangent axis 2 (unit)
-SH_EXT = 13     # 2: plane half extents along U, V (inf: unbounded)
-SH_R = 15       # sphere radius
-SH_WIDTH = 16
+from gdlearn.shifts.specular_trace import relaxed_accept
+from gdlearn.shifts.manifold_shapes import (SH_EXT, SH_N, SH_P, SH_R, SH_TYPE, SH_U, SH_V, SH_WIDTH,  # noqa: F401
+                                         SHAPE_PLANE, SHAPE_SPHERE, _v3, plane_row, shape_chart, shape_contains,
+                                         shape_frame, sphere_row)
 
 MAX_ITER = 5
 MAX_HALVINGS = 10
@@ -65,68 +59,6 @@ FD_REL_STEP = 1e-6
 #: a walk step's forward differences: ~sqrt(machine epsilon), where truncation and round-off are
 #: both ~1e-8 of A (:func:`walk_jacobian`)
 WALK_FD_REL_STEP = 1e-8
-
-
-def plane_row(point, normal, u_axis, extent=(math.inf, math.inf)):
-    """A plane (quad) row; u_axis is projected to the tangent plane; extent = half sizes along U, V."""
-    n = np.asarray(normal, float)
-    n = n / np.linalg.norm(n)
-    u = np.asarray(u_axis, float)
-    u = u - np.dot(u, n) * n
-    if not np.linalg.norm(u) > 1e-12:
-        raise ValueError("plane_row: u_axis is parallel to the normal; fix: pass a tangent direction")
-    u /= np.linalg.norm(u)
-    row = np.zeros(SH_WIDTH)
-    row[SH_TYPE] = SHAPE_PLANE
-    row[SH_P:SH_P + 3], row[SH_N:SH_N + 3] = point, n
-    row[SH_U:SH_U + 3], row[SH_V:SH_V + 3] = u, np.cross(n, u)
-    row[SH_EXT:SH_EXT + 2] = extent
-    return row
-
-
-def sphere_row(center, radius):
-    if not radius > 0:
-        raise ValueError(f"sphere_row: radius must be > 0, got {radius!r}; fix: pass a positive radius")
-    row = np.zeros(SH_WIDTH)
-    row[SH_TYPE] = SHAPE_SPHERE
-    row[SH_P:SH_P + 3] = center
-    row[SH_R] = radius
-    return row
-
-
-@ir_inline
-def _v3(a, i, c):
-    return (a[i, c], a[i, c + 1], a[i, c + 2])
-
-
-@inlined
-def shape_frame(shapes, j, x):
-    """(s, t, n) local frame of chain vertex j at x."""
-    if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
-        return _v3(shapes, j, SH_U), _v3(shapes, j, SH_V), _v3(shapes, j, SH_N)
-    n = vec.normalize(vec.sub(x, _v3(shapes, j, SH_P)))
-    s, t = vec.coordinate_system(n)
-    return s, t, n
-
-
-@inlined
-def shape_chart(shapes, j, x, u, v):
-    """Move x on its surface by (u, v) in the tangent frame (derivative at 0 is orthonormal)."""
-    s, t, n = shape_frame(shapes, j, x)
-    y = (x[0] + u * s[0] + v * t[0], x[1] + u * s[1] + v * t[1], x[2] + u * s[2] + v * t[2])
-    if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
-        return y
-    c = _v3(shapes, j, SH_P)
-    return vec.add(c, vec.scale(vec.normalize(vec.sub(y, c)), shapes[j, SH_R]))
-
-
-@inlined
-def shape_contains(shapes, j, x):
-    if int(shapes[j, SH_TYPE]) != SHAPE_PLANE:
-        return True
-    d = vec.sub(x, _v3(shapes, j, SH_P))
-    return (abs(vec.dot(d, _v3(shapes, j, SH_U))) <= shapes[j, SH_EXT]
-            and abs(vec.dot(d, _v3(shapes, j, SH_V))) <= shapes[j, SH_EXT + 1])
 
 
 @inlined
@@ -287,10 +219,17 @@ def _norm2(a, m):
 
 
 @block
-def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol):
+def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_halvings, tol, relax):
     """Newton walk (module docstring) moving the chain X (k x 3, updated in place, start = base
-    chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|)."""
+    chain) until it joins x0 and xe. Returns ``(ok, iterations, residual)`` (max |c_j|).
+
+    ``relax``: None (the exact walk; numba compiles no relaxed code for it), or (xg, r) for
+    Gruson et al. 2018's relaxed acceptance (:func:`gdlearn.shifts.specular_trace.relaxed_accept`,
+    r > 0; r = 0 walks exactly): an iterate whose traced chain ends within r of xe and of the
+    gather point xg is accepted, and X becomes that traced chain."""
     m = 2 * k
+    if relax is not None:
+        Xt = np.empty((k, 3))
     C = np.empty(m)
     Cn = np.empty(m)
     A = np.empty((m, m))
@@ -302,6 +241,9 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
     for it in range(max_iter):
         if r < tol:
             return True, it, r
+        if relax is not None:
+            if _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
+                return True, it, r
         # Xn, Cn serve as the probes' scratch until the step below fills them
         if not walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xn, Cn):
             return False, it, r
@@ -323,7 +265,20 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
         X[:] = Xn
         C[:] = Cn
         r = _max_abs(C, m)
+    if relax is not None:
+        if r >= tol and _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
+            return True, max_iter, r
     return r < tol, max_iter, r
+
+
+@inlined
+def _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
+    """The relaxed acceptance of iterate X (``relax`` = (xg, r), r > 0); X <- its traced chain."""
+    xg, rr = relax
+    if not (rr > 0.0 and relaxed_accept(x0, X, xe, xg, rr, shapes, etas, refract, targets, k, Xt)):
+        return False
+    X[:] = Xt
+    return True
 
 
 @block
@@ -369,18 +324,18 @@ def predicted_start(X, xe, ne, xe_new, S, shapes, k, Xp):
 
 
 @block
-def predicted_walk(x0, X, xe, ne, xe_new, S, shapes, etas, refract, targets, k, Xo):
+def predicted_walk(x0, X, xe, ne, xe_new, S, shapes, etas, refract, targets, k, Xo, relax):
     """Xo <- the chain X walked to join x0 and ``xe_new``, started at :func:`predicted_start` -- or
     at X itself where the prediction leaves a finite surface (or another event's side). A
     deterministic function of the base chain and the new endpoint, as a shift must be. Returns
-    :func:`manifold_walk`'s ``(ok, iterations, residual)``."""
+    :func:`manifold_walk`'s ``(ok, iterations, residual)``; ``relax`` as there."""
     predicted_start(X, xe, ne, xe_new, S, shapes, k, Xo)
-    ok, it, r = manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL)
+    ok, it, r = manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL, relax)
     if ok or it > 0 or r < math.inf:
         return ok, it, r
     for j in range(k):                      # the predicted start is invalid: the plain walk
         Xo[j, 0], Xo[j, 1], Xo[j, 2] = X[j, 0], X[j, 1], X[j, 2]
-    return manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL)
+    return manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL, relax)
 
 
 @block
@@ -403,7 +358,7 @@ def _walks_back(x_b, X_base, x_c, Xo, shapes, etas, refract, targets, k, max_ite
     several chains join the same endpoints and the shift would not be invertible there."""
     Xb = Xo.copy()
     ok, _, _ = manifold_walk(x_b, x_c, Xb, shapes, etas, refract, targets, k, max_iter,
-                             MAX_HALVINGS, TOL)
+                             MAX_HALVINGS, TOL, None)
     return ok and same_chain(x_b, X_base, x_c, Xb, k)
 
 
@@ -438,7 +393,7 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
     X_out[:k] = X_base[:k]
     Xo = X_out[:k]
     ok, iters, _ = manifold_walk(x_b_offset, x_c, Xo, shapes, etas, refract, targets, k,
-                                 max_iter, MAX_HALVINGS, TOL)
+                                 max_iter, MAX_HALVINGS, TOL, None)
     if not ok:
         return 0.0, False, iters
     det_b, ok_b = chain_endpoint_det(x_b, X_base, x_c, n_c, shapes, etas, refract, targets, k)

@@ -26,6 +26,9 @@ r_i = r_1 prod (j + alpha) / (j + 1) to the power 1/k, k the kernel's dimension)
 is an independent estimate and the frame their mean; ``volume_radius=r, alpha=1`` keeps r fixed
 and the gradients unbiased for the differences of the blurred image (tests/test_gbre.py).
 
+``walk``: a volume photon's specular chain walked exactly (default) or relaxed, as ``gvpm``'s
+(:mod:`gdlearn.integrators.photon.gvpm`).
+
 ``transport="all"`` (default): the BRE's full image -- the emission the camera paths see and the
 surface photon estimate at the first non-specular vertex beside the medium estimate -- with the
 surface part's gradients by G-VPM's surface pass (:func:`gdlearn.integrators.photon.gvol_surface.surface_pass`:
@@ -59,6 +62,7 @@ from gdlearn.integrators.photon import gbre_gather as gb
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
+from gdlearn.integrators.photon.photon_manifold import relaxed_walk
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE
 from gdlearn.integrators.photon.volumetric import BRE
 from gdlearn.photons import bbh as bbh_mod
@@ -85,7 +89,7 @@ def subset_weights(n_half: int, subsets: bool) -> np.ndarray:
 
 
 class GBRE(BRE):
-    """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, seed=0,
+    """``make("gbre", scene, transport="all", kernel="3d", shift=None, subsets=True, walk="exact", seed=0,
     photons_per_pass=100000, alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None,
     volume_radius_scale=0.1, neighbors=32, effects=None, max_depth=None, threads=None)`` (module
     docstring; ``radius``: the surface part's initial radius, transport="all" only); ``shift`` None is "mixed" for
@@ -94,8 +98,8 @@ class GBRE(BRE):
     name = "gbre"
 
     def __init__(self, scene, *, kernel: str = "3d", shift: str | None = None, subsets: bool = True,
-                 transport: str = "all", radii: str = "fixed", volume_radius_scale: float = VOLUME_RADIUS_SCALE,
-                 **options):
+                 walk: str = "exact", transport: str = "all", radii: str = "fixed",
+                 volume_radius_scale: float = VOLUME_RADIUS_SCALE, **options):
         if shift is None:
             shift = "mixed" if kernel == "3d" else "simple"
         if shift not in SHIFTS:
@@ -110,7 +114,8 @@ class GBRE(BRE):
         super().__init__(scene, kernel=kernel, transport=transport, radii="fixed",
                          volume_radius_scale=volume_radius_scale, **options)
         self.shift, self.subsets = shift, bool(subsets)
-        self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets)
+        self.walk = "relaxed" if relaxed_walk("gbre", walk) else "exact"
+        self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets, self.walk == "relaxed")
         self.wsub = subset_weights(self.n_half, self.subsets)
         self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 

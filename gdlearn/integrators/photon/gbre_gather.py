@@ -86,6 +86,7 @@ class GbreParams(NamedTuple):
     kernel: int           # KERNEL_2D or KERNEL_3D (volume_estimates)
     mixed: bool           # 3D: the mixed shift (Eq. 16); False: the simple shift
     subsets: bool         # photon subsets on a checkerboard (module docstring, item 5)
+    relaxed: bool         # the relaxed manifold walk (Sec. 6.1; photon_manifold.shift_volume_chain); False: exact
 
 
 class Scratch(NamedTuple):
@@ -310,19 +311,20 @@ def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
 
 
 @inlined
-def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack):
+def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack, relax):
     """(ok, beta_b' / beta_b per channel, light-side density ratio, arrival direction at b', walked)
     of photon row v moved to b': unchanged for a null shift (T(y) = y), else reconnected from its
     parent with the recorded edge a -> b walked on the first neighbour that needs it and kept in
     ``scr.edge`` for the others (``gvpm_light.reconnect_edge``: the same arithmetic as ``reconnect``),
     or -- a specular parent -- completed by the manifold walk (Gruson et al. 2018 Sec. 4.3,
-    :func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`)."""
+    :func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`; ``relax``: its
+    (d', radius) of the relaxed walk, radius 0 for the exact one)."""
     if kind == NULL:
         return True, _ONE, 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2]), False
     if scr.edge[0, 0] == EDGE_UNKNOWN:
         store_edge(scr.edge, 0, base_edge(sa, lp, v, stack))
     status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, 0), r, scr.chain,
-                                                          stack)
+                                                          stack, relax)
     return status == OK, f3, rl, w_in, walked
 
 
@@ -353,7 +355,8 @@ def _shift_photon(sa, lp, mtab, v, gp, g, q, offs, pre, c_b, scr, stack):
             else:
                 ok, kind, b2, num, den = _place_3d(lp, v, o, d, o2, d2, t, obeams[j, b, BEAM_S], r, half, gp.mixed)
             if ok:
-                ok, f3, rl, w_in, walked = _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack)
+                relax = (_along(o2, d2, t), r if gp.relaxed else 0.0)     # d': the offset gather point
+                ok, f3, rl, w_in, walked = _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack, relax)
             if ok:
                 # f(T x) |J| / p(x): the offset camera weight, the phase at d' for the (new) arrival
                 # direction, the base's T(t) (same t, same medium) and the base's kernel density;

@@ -45,10 +45,13 @@ sensitive to the kernel's size). A smaller kernel also holds fewer photons to sh
 reconnected). Reconnections cross null interfaces (a medium's boundary) as the base edge did
 (:mod:`gdlearn.integrators.photon.gvpm_light`). A volume photon whose parent is specular (the cone
 under a glass ball: scenes/volume-caustic.xml) takes the manifold walk of Sec. 4.3 when its chain
-lies in vacuum (:func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`: converged,
-not the paper's relaxed acceptance, so a fixed radius stays unbiased), and fails otherwise; surface
-photons take GPM's manifold walk on the same condition
-(:mod:`gdlearn.integrators.photon.gvol_surface_light`).
+lies in vacuum (:func:`gdlearn.integrators.photon.photon_manifold.manifold_volume_photon`), and fails
+otherwise; surface photons take GPM's manifold walk on the same condition
+(:mod:`gdlearn.integrators.photon.gvol_surface_light`). The walk converges and walks back
+(``walk="exact"``, the default), so a fixed radius keeps the gradients unbiased; ``walk="relaxed"``
+is the paper's default (Sec. 6.1), accepted once the chain it traces ends inside the offset
+photon's kernel and without the walk back -- biased, consistent as the radius shrinks, and
+measured worse at equal time on the volume caustic (benchmarks/README.md, "The relaxed walk").
 """
 from __future__ import annotations
 
@@ -61,6 +64,7 @@ from gdlearn.integrators.gradients import pass_halves
 from gdlearn.integrators.path.gpt_surface.manifold import manifold_table
 from gdlearn.integrators.photon import gvpm_gather as gg
 from gdlearn.integrators.photon.gvol_surface import SURFACE_COUNTS, surface_pass
+from gdlearn.integrators.photon.photon_manifold import relaxed_walk
 from gdlearn.integrators.photon.sppm import FOOTPRINT_SAMPLE, accumulate_density, reduce_radius
 from gdlearn.integrators.photon.volumetric import VPM, reduce_radius3
 from gdlearn.photons import grid as hashgrid
@@ -73,14 +77,14 @@ _MEDIUM_COUNTS = ("null", "mixed", "reconnected", "failed", "manifold")
 
 
 class GVPM(VPM):
-    """``make("gvpm", scene, transport="all", shift="mixed", seed=0, photons_per_pass=100000,
+    """``make("gvpm", scene, transport="all", shift="mixed", walk="exact", seed=0, photons_per_pass=100000,
     alpha=0.7, radius=None, radius_scale=1.0, volume_radius=None, volume_radius_scale=0.2,
     neighbors=32, samples=8, effects=None, max_depth=None, threads=None)`` (module docstring)."""
 
     name = "gvpm"
 
-    def __init__(self, scene, *, shift: str = "mixed", transport: str = "all", radii: str = "fixed",
-                 volume_radius_scale: float = VOLUME_RADIUS_SCALE, **options):
+    def __init__(self, scene, *, shift: str = "mixed", walk: str = "exact", transport: str = "all",
+                 radii: str = "fixed", volume_radius_scale: float = VOLUME_RADIUS_SCALE, **options):
         if shift not in SHIFTS:
             raise ValueError(f"gvpm: shift={shift!r}; choose mixed (Gruson et al. 2018, Eq. 16) or simple")
         if radii != "fixed":
@@ -88,7 +92,8 @@ class GVPM(VPM):
                              "--radii (progressive per-pixel radii)")
         super().__init__(scene, transport=transport, radii="fixed", volume_radius_scale=volume_radius_scale, **options)
         self.shift = shift
-        self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed")
+        self.walk = "relaxed" if relaxed_walk("gvpm", walk) else "exact"
+        self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed", self.walk == "relaxed")
         self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 
     def _gvpm(self, lp, vgrids, sample0, radius):

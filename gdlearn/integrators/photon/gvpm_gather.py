@@ -83,6 +83,7 @@ N_COUNTS = 5
 class GvpmParams(NamedTuple):
     samples: int          # distance samples per camera path (VPM's K)
     mixed: bool           # the mixed shift (Eq. 16); False: the simple shift (a translation)
+    relaxed: bool         # the relaxed manifold walk (Sec. 6.1; photon_manifold.shift_volume_chain); False: exact
 
 
 class GvpmOut(NamedTuple):
@@ -266,7 +267,7 @@ def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, ou
             offset_paths(sa, prm, h, film, stack, beams, bstate, nb, offs)
             traced = True
         _offset_gather((offs[0], offs[2]), nb, b, t, sbar, pb, pdf, tr, k0, og)
-        nbad += _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv.mixed, og, stack, out, hh, y, x)
+        nbad += _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv, og, stack, out, hh, y, x)
     out.m[hh, y, x] = cnt
     return nbad
 
@@ -312,7 +313,7 @@ def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
 
 
 @inlined
-def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y, x):
+def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv, og, stack, out, hh, y, x):
     """The photons of one distance sample (scratch rows 0..n) shifted to the four neighbours' gather
     points og[j], photon by photon: a photon's recorded edge and specular chain are built once for
     its four shifts. D_j, S_j and the shift counts are summed in the row scratch (scr.acc, scr.cnt)
@@ -333,7 +334,7 @@ def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y,
             continue
         scr.chain.state[0] = CHAIN_UNKNOWN
         for j in range(4):
-            nbad += _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack)
+            nbad += _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, gv, og, j, stack)
     for i in range(1, 9):
         for c in range(3):
             out.phi[hh, i, y, x, c] = acc[i, c]
@@ -343,7 +344,7 @@ def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, mixed, og, stack, out, hh, y,
 
 
 @inlined
-def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack):
+def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, gv, og, j, stack):
     """Photon v (scratch row i, base term scr.cb[i]) shifted to neighbour j's gather point og[j]:
     its terms and outcome added to the sums (:func:`add_shift`). Returns the non-finite terms
     dropped (counted, never written)."""
@@ -356,13 +357,13 @@ def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, mixed, og, j, stack):
     nbad = 0
     if ok:
         dp = (og[j, 1], og[j, 2], og[j, 3])
-        b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, mixed)
+        b2, kind = photon_shift((lp.pos[v, 0], lp.pos[v, 1], lp.pos[v, 2]), dg, dp, r, gv.mixed)
         f3, rl, w_in = (1.0, 1.0, 1.0), 1.0, (lp.d_in[v, 0], lp.d_in[v, 1], lp.d_in[v, 2])
         if kind != NULL:
             if scr.edge[i, 0] == EDGE_UNKNOWN:
                 store_edge(scr.edge, i, base_edge(sa, lp, v, stack))
             status, f3, rl, w_in, walked = complete_volume_photon(sa, lp, mtab, v, b2, load_edge(scr.edge, i), r,
-                                                                  scr.chain, stack)
+                                                                  scr.chain, stack, (dp, r if gv.relaxed else 0.0))
             ok = status == OK
         if ok:
             ph = hg_eval(g, og[j, 4] * w_in[0] + og[j, 5] * w_in[1] + og[j, 6] * w_in[2])

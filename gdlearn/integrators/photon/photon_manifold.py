@@ -80,16 +80,17 @@ def chain_rows(sa, lp, mtab, q, rows):
 
 
 @block
-def _delta_value(mat, ns, w_in, w_out_world, refl):
+def _delta_value(mat, ns, w_in, w_out_world, refl, loose):
     """(F per channel, P, ok): the delta lobe of kind ``refl`` at a vertex of shading normal ns, the
-    light arriving along w_in (direction of travel), leaving along w_out_world (checked)."""
+    light arriving along w_in (direction of travel), leaving along w_out_world (checked, unless
+    ``loose``: a relaxed walk's last event)."""
     s, t = coordinate_system(ns)
     wi = to_local((-w_in[0], -w_in[1], -w_in[2]), s, t, ns)
     wo, wt, pdf, ok = same_delta_lobe(mat, wi, refl)
     if not ok:
         return (0.0, 0.0, 0.0), 0.0, False
     wl = to_local(w_out_world, s, t, ns)
-    if not abs(wo[0] - wl[0]) + abs(wo[1] - wl[1]) + abs(wo[2] - wl[2]) <= 1e3 * POS_TOL:   # as gpt's manifold
+    if not (loose or abs(wo[0] - wl[0]) + abs(wo[1] - wl[1]) + abs(wo[2] - wl[2]) <= 1e3 * POS_TOL):  # as gpt's
         return (0.0, 0.0, 0.0), 0.0, False
     return (wt[0] * pdf, wt[1] * pdf, wt[2] * pdf), pdf, True
 
@@ -146,7 +147,7 @@ def walk_forward(yb, X, ys, ns, ye, shapes, etas, refr, k):
     ok, det_b = base_sensitivity(yb, X, ys, ns, shapes, etas, refr, k, targets, np.empty((m, m)), S)
     if not ok:
         return False, Xo, targets, 0.0
-    ok, _, _ = M.predicted_walk(yb, X, ys, ns, ye, S, shapes, etas, refr, targets, k, Xo)
+    ok, _, _ = M.predicted_walk(yb, X, ys, ns, ye, S, shapes, etas, refr, targets, k, Xo, None)
     return ok, Xo, targets, det_b
 
 
@@ -162,7 +163,7 @@ def walks_back(yb, X, ys, Xo, ye, ne, shapes, etas, refr, targets, k):
     if not ok:
         return False, 0.0
     Xb = np.empty((k, 3))
-    ok, _, _ = M.predicted_walk(yb, Xo, ye, ne, ys, S, shapes, etas, refr, targets, k, Xb)
+    ok, _, _ = M.predicted_walk(yb, Xo, ye, ne, ys, S, shapes, etas, refr, targets, k, Xb, None)
     if not (ok and M.same_chain(yb, X, ys, Xb, k)):
         return False, 0.0
     return True, det_o
@@ -192,10 +193,12 @@ def yb_of(lp, b):
 
 
 @block
-def chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, ye, nrm_o, refr, j_area):
+def chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, ye, nrm_o, refr, j_area, relaxed):
     """The offset light subpath over the base's, given the area Jacobian ``j_area`` at y_{b+1}: J in
     the solid angle at y_b, y_b's value and density towards the offset chain, every delta lobe at
-    the offset's angles. Returns (ok, (f'/f per channel) J_w, (p'/p) J_w, the arrival direction at y'_s)."""
+    the offset's angles. Returns (ok, (f'/f per channel) J_w, (p'/p) J_w, the arrival direction at y'_s).
+    ``relaxed``: the last event may leave towards y'_s off its delta direction (a relaxed walk,
+    :func:`shift_volume_chain`); its lobe is valued at its incoming angle."""
     x1 = (X[0, 0], X[0, 1], X[0, 2])
     x1o = (Xo[0, 0], Xo[0, 1], Xo[0, 2])
     n1 = (lp.nrm[rows[k - 1], 0], lp.nrm[rows[k - 1], 1], lp.nrm[rows[k - 1], 2])
@@ -220,8 +223,8 @@ def chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, ye, nrm_o, refr, j_area):
         ns_o = (nrm_o[j, 3], nrm_o[j, 4], nrm_o[j, 5])
         out_b, _ = _dir((X[j, 0], X[j, 1], X[j, 2]), nxt_b)
         out_o, _ = _dir((Xo[j, 0], Xo[j, 1], Xo[j, 2]), nxt_o)
-        fb, pb, okb = _delta_value(mat, ns_b, w_in_b, out_b, not refr[j])
-        fo, po, oko = _delta_value(mat, ns_o, w_in_o, out_o, not refr[j])
+        fb, pb, okb = _delta_value(mat, ns_b, w_in_b, out_b, not refr[j], False)
+        fo, po, oko = _delta_value(mat, ns_o, w_in_o, out_o, not refr[j], relaxed and j == k - 1)
         if not (okb and oko and pb > 0.0):
             return False, _ZERO, 0.0, _ZERO
         if (fb[0] > 0.0) != (fo[0] > 0.0) or (fb[1] > 0.0) != (fo[1] > 0.0) or (fb[2] > 0.0) != (fo[2] > 0.0):
@@ -270,7 +273,7 @@ def manifold_photon(sa, lp, mtab, prm, v, q, ystar, nstar, r, p2, stack):
     # parent sees the base photon
     if not (ok and reaches(sa, last, n_last, yh, r, stack)[0] and reaches(sa, last, n_last, ys, r, stack)[0]):
         return False, _ZERO, 0.0, _ZERO
-    return chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, yh, nrm_o, refr, j_area)
+    return chain_ratios(sa, lp, rows, k, b, yb, X, Xo, ys, yh, nrm_o, refr, j_area, False)
 
 
 @block
@@ -281,6 +284,22 @@ def _in_vacuum(lp, rows, k):
         if lp.medium[rows[j]] >= 0:
             return False
     return True
+
+
+#: ``walk`` of gvpm and gbre: how a volume photon's specular chain is walked (:func:`shift_volume_chain`)
+WALKS = ("relaxed", "exact")
+
+
+def relaxed_walk(name: str, walk: str) -> bool:
+    """Whether ``name`` (gvpm, gbre) walks volume photons' chains relaxed (``walk`` "relaxed") or
+    exactly ("exact", the default). The relaxed walk is Gruson et al. 2018's default (Sec. 6.1),
+    consistent as the radius shrinks; measured at equal time on the volume caustic, its bias cost
+    more than its extra shifts bought (benchmarks/README.md, "The relaxed walk")."""
+    if walk not in WALKS:
+        raise ValueError(f"{name}: walk={walk!r}; choose exact (converged and reversible: unbiased at a fixed "
+                         "radius) or relaxed (Gruson et al. 2018 Sec. 6.1: accepted inside the offset kernel, "
+                         "biased, consistent as the radius shrinks)")
+    return walk == "relaxed"
 
 
 class VolumeChain(NamedTuple):
@@ -335,11 +354,17 @@ def volume_chain(sa, lp, mtab, v, edge, ch):
 
 
 @block
-def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
+def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax):
     """Shift the volume photon row v, whose parent a = y_{s-1} lies on the specular chain ``ch``
     (:func:`volume_chain`, state CHAIN_OK), to ``b_off`` (module docstring). Returns what
     gvpm_light.reconnect_edge does: (status, beta_b' / beta_b per channel, light-side density ratio
-    p(b') / p(b), the direction b' is reached along)."""
+    p(b') / p(b), the direction b' is reached along).
+
+    ``relax`` = (d', r_relax): with r_relax > 0, Gruson et al. 2018's relaxed walk (Sec. 6.1;
+    :mod:`gdlearn.shifts.specular_trace`): accepted once its traced chain ends within r_relax of b'
+    and of the offset gather point d', evaluated with that chain (the last event off by at most the
+    kernel's angle), and without the reversibility walk (the reference code drops it when r > 0):
+    biased, consistent as the radius shrinks. r_relax = 0: the exact, reversible walk."""
     _, q, child, n_null, tau_b, logp_b = edge
     k, b = ch.state[1], ch.state[2]
     X, shapes, etas, refr, targets = ch.X, ch.shapes, ch.etas, ch.refr, ch.targets
@@ -347,7 +372,8 @@ def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
     w_b, _ = _dir((lp.pos[q, 0], lp.pos[q, 1], lp.pos[q, 2]), ys)
     yb = yb_of(lp, b)
     Xo = np.empty((k, 3))
-    ok, _, _ = M.predicted_walk(yb, X, ys, w_b, b_off, ch.S, shapes, etas, refr, targets, k, Xo)
+    relaxed = relax[1] > 0.0
+    ok, _, _ = M.predicted_walk(yb, X, ys, w_b, b_off, ch.S, shapes, etas, refr, targets, k, Xo, relax)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     # each endpoint's chart lies across its own last segment (module docstring)
@@ -355,7 +381,10 @@ def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
     w_o, l_o = _dir(a_o, b_off)
     if not l_o > 0.0:
         return FAIL, _ZERO, 0.0, _ZERO
-    ok, det_o = walks_back(yb, X, ys, Xo, b_off, w_o, shapes, etas, refr, targets, k)
+    if relaxed:
+        det_o, ok = M.chain_endpoint_det(yb, Xo, b_off, w_o, shapes, etas, refr, targets, k)
+    else:
+        ok, det_o = walks_back(yb, X, ys, Xo, b_off, w_o, shapes, etas, refr, targets, k)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     ok, nrm_o = offset_chain_normals(sa, lp, mtab, ch.rows, k, yb, (lp.nrm[b, 0], lp.nrm[b, 1], lp.nrm[b, 2]), Xo, r,
@@ -368,7 +397,8 @@ def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
                                               stack)
     if not (ok and n_o == n_null and med_o == lp.medium[v]):
         return FAIL, _ZERO, 0.0, _ZERO
-    ok, f3, pp, w_in = chain_ratios(sa, lp, ch.rows, k, b, yb, X, Xo, ys, b_off, nrm_o, refr, det_o / ch.det[0])
+    ok, f3, pp, w_in = chain_ratios(sa, lp, ch.rows, k, b, yb, X, Xo, ys, b_off, nrm_o, refr, det_o / ch.det[0],
+                                    relaxed)
     if not ok:
         return FAIL, _ZERO, 0.0, _ZERO
     # T(a', b') / T(a, b) per channel and the tracer's collision densities, as gvpm_light.reconnect_edge
@@ -378,26 +408,28 @@ def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack):
 
 
 @block
-def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack):
+def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack, relax):
     """Shift the volume photon row v, whose parent a = y_{s-1} (``edge``: its recorded edge a -> b,
     :func:`gdlearn.integrators.photon.gvpm_light.base_edge`) lies on a specular chain, to ``b_off``:
     :func:`volume_chain` then :func:`shift_volume_chain` (a camera pass with several neighbours per
-    photon builds the chain once)."""
+    photon builds the chain once; ``relax`` as there)."""
     ch = new_volume_chain()
     volume_chain(sa, lp, mtab, v, edge, ch)
     if ch.state[0] != CHAIN_OK:
         return FAIL, _ZERO, 0.0, _ZERO
-    return shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack)
+    return shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax)
 
 
 @inlined
-def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack):
+def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax):
     """The light subpath of volume photon row v moved to ``b_off`` (Gruson et al. 2018, Sec. 4.3):
     reconnected from its parent (:func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge`), or,
     when the parent is specular, by the manifold walk (:func:`shift_volume_chain`) of the chain
     ``ch``, built at the first neighbour that needs it (the caller sets ch.state[0] to
     CHAIN_UNKNOWN for each new photon). Returns reconnect_edge's tuple and whether the walk
-    completed it. Inlined: G-VPM's and G-BRE's camera passes call it per photon and neighbour."""
+    completed it; ``relax`` = (the offset gather point d', the relaxed walk's radius, 0 for the exact
+    walk): :func:`shift_volume_chain`. Inlined: G-VPM's and G-BRE's camera passes call it per photon
+    and neighbour."""
     status, f3, rl, w_in = reconnect_edge(sa, lp, v, b_off, stack, edge)
     if status != FAIL_SPECULAR:
         return status, f3, rl, w_in, False
@@ -405,5 +437,5 @@ def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack):
         volume_chain(sa, lp, mtab, v, edge, ch)
     if ch.state[0] != CHAIN_OK:
         return FAIL, _ZERO, 0.0, _ZERO, True
-    status, f3, rl, w_in = shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack)
+    status, f3, rl, w_in = shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax)
     return status, f3, rl, w_in, True
