@@ -26,7 +26,8 @@ resolution, the budget and the sources of its pipeline (so an edit of the G-VPM 
 ``--methods`` picks others, the first the ratios' base (``name@S`` starts from S x the default
 volume radius, e.g. ``vpm@0.35``): G-BRE's study is ``--methods
 bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-frame copy; photon
-subsets on; bre-2d is there too). Prints each method's final relMSE per seed, the ratio base /
+subsets on; bre-2d is there too; ``gvpm-relaxed+l1``, ``gbre-relaxed+l1`` and their l2 twins walk
+volume photons' chains relaxed, Gruson et al. 2018 Sec. 6.1). Prints each method's final relMSE per seed, the ratio base /
 method (> 1: lower error than the base), its mean, min and max over the seeds, and the same with
 the reference's noise floor subtracted
 from both errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R).
@@ -239,6 +240,11 @@ def methods(a, extra=()) -> dict:
              "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
              "gbre+l2": Method("gbre+l2", "gbre", "l2", opts + k3 + (("shift", "mixed"),)),
              "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
+    for name in ("gvpm+l1", "gvpm+l2", "gbre+l1", "gbre+l2"):     # Gruson et al.'s relaxed walk, not the exact one
+        est, _, sol = name.partition("+")
+        m = every[name]
+        every[f"{est}-relaxed+{sol}"] = Method(f"{est}-relaxed+{sol}", m.estimator, m.solver,
+                                               m.options + (("walk", "relaxed"),))
     for name in a.methods.split(","):
         base, _, scale = name.partition("@")       # "vpm@0.35": vpm from 0.35 x the default volume radius
         if base not in every:
