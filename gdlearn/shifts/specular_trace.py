@@ -5,11 +5,11 @@ walk (Gruson et al. 2018, Sec. 6.1; PHOTONS.md Sec. 5.4, "Relaxed manifold explo
 of the chain exactly: at vertex j the half vector is the base's (``targets``, the tangential
 components in the vertex's frame; 0 for a perfect mirror or dielectric), the outgoing direction
 follows from it by reflection or refraction (the inverse of the half vector, as
-:func:`gdlearn.shifts.halfvector.halfvector_copy` computes it), and the next vertex is where that
+``gdlearn.shifts.halfvector.halfvector_copy`` computes it), and the next vertex is where that
 ray meets the next chain shape. Only the analytic shapes are hit, not the scene: the caller checks
 the chain's visibility.
 
-A Newton iterate of the walk (:func:`gdlearn.shifts.manifold.manifold_walk`) joins x_0 to its
+A Newton iterate of the walk (``gdlearn.shifts.manifold.manifold_walk``) joins x_0 to its
 endpoint with every vertex on its shape but its half vectors off by the residual; the traced chain
 is the light path it stands for, whose end misses the target. Gruson et al. accept the walk as soon
 as that end lies in the offset photon's kernel: within r of the photon b' *and* of the offset
