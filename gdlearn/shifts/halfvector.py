@@ -68,6 +68,32 @@ def dh_dwo(wi, wo, h, k):
     return k * k * abs(vec.dot(wo, h)) / (den * den)
 
 
+@ir_inline
+def outgoing(wi, h, eta, refract):
+    """``(wo, k, ok)``: the direction leaving a vertex of half vector h (local frame, +z; ``wi``
+    pointing away from the vertex) by reflection or by refraction through relative index eta
+    (int/ext), the inverse of :func:`half_vector`, with its k. Not ok under total internal
+    reflection, or where a direction lies on the wrong side of the macro- or microsurface."""
+    ci = vec.dot(wi, h)
+    if refract:
+        _, cos_t, eta_it, eta_ti = fresnel_dielectric(ci, eta)
+        if cos_t == 0.0:                   # total internal reflection (or exactly grazing)
+            return ZERO3, 1.0, False
+        wo = vec.normalize(refract_m(wi, h, cos_t, eta_ti))
+        k = eta_it
+        if not (wo[2] * wi[2] < 0.0):
+            return ZERO3, 1.0, False
+    else:
+        wo = (2.0 * ci * h[0] - wi[0], 2.0 * ci * h[1] - wi[1], 2.0 * ci * h[2] - wi[2])
+        k = 1.0
+        if not (wo[2] * wi[2] > 0.0):
+            return ZERO3, 1.0, False
+    # micro- and macrosurface must agree on the side of each direction (else the BSDF is zero)
+    if not (ci * wi[2] > 0.0 and vec.dot(wo, h) * wo[2] > 0.0):
+        return ZERO3, 1.0, False
+    return wo, k, True
+
+
 @leaf
 def halfvector_copy(wi_b, wo_b, wi_o, eta, transmissive):
     """Shift the outgoing direction at one vertex by copying the half vector (Eq. 15).
@@ -87,22 +113,8 @@ def halfvector_copy(wi_b, wo_b, wi_o, eta, transmissive):
     h, k, ok = half_vector(wi_b, wo_b, eta)
     if not ok:
         return ZERO3, 0.0, False
-    ci = vec.dot(wi_o, h)
-    if refl:
-        wo_o = (2.0 * ci * h[0] - wi_o[0], 2.0 * ci * h[1] - wi_o[1], 2.0 * ci * h[2] - wi_o[2])
-        k_o = 1.0
-        if not (wo_o[2] * wi_o[2] > 0.0):
-            return ZERO3, 0.0, False
-    else:
-        _, cos_t, eta_it, eta_ti = fresnel_dielectric(ci, eta)
-        if cos_t == 0.0:                   # total internal reflection (or exactly grazing)
-            return ZERO3, 0.0, False
-        wo_o = vec.normalize(refract_m(wi_o, h, cos_t, eta_ti))
-        k_o = eta_it
-        if not (wo_o[2] * wi_o[2] < 0.0):
-            return ZERO3, 0.0, False
-    # micro- and macrosurface must agree on the side of each direction (else the BSDF is zero)
-    if not (ci * wi_o[2] > 0.0 and vec.dot(wo_o, h) * wo_o[2] > 0.0):
+    wo_o, k_o, ok = outgoing(wi_o, h, eta, not refl)
+    if not ok:
         return ZERO3, 0.0, False
     d_b = dh_dwo(wi_b, wo_b, h, k)
     d_o = dh_dwo(wi_o, wo_o, h, k_o)

@@ -228,8 +228,6 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
     r > 0; r = 0 walks exactly): an iterate whose traced chain ends within r of xe and of the
     gather point xg is accepted, and X becomes that traced chain."""
     m = 2 * k
-    if relax is not None:
-        Xt = np.empty((k, 3))
     C = np.empty(m)
     Cn = np.empty(m)
     A = np.empty((m, m))
@@ -241,10 +239,10 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
     for it in range(max_iter):
         if r < tol:
             return True, it, r
+        # Xn, Cn serve as the relaxed test's and the probes' scratch until the step below fills them
         if relax is not None:
-            if _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
+            if _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xn):
                 return True, it, r
-        # Xn, Cn serve as the probes' scratch until the step below fills them
         if not walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xn, Cn):
             return False, it, r
         for i in range(m):
@@ -266,7 +264,7 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
         C[:] = Cn
         r = _max_abs(C, m)
     if relax is not None:
-        if r >= tol and _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
+        if r >= tol and _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xn):
             return True, max_iter, r
     return r < tol, max_iter, r
 

@@ -4,8 +4,8 @@ walk (Gruson et al. 2018, Sec. 6.1; PHOTONS.md Sec. 5.4, "Relaxed manifold explo
 :func:`traced_chain` starts at x_0, leaves towards the walk's first vertex X[0] and obeys every event
 of the chain exactly: at vertex j the half vector is the base's (``targets``, the tangential
 components in the vertex's frame; 0 for a perfect mirror or dielectric), the outgoing direction
-follows from it by reflection or refraction (the inverse of the half vector, as
-``gdlearn.shifts.halfvector.halfvector_copy`` computes it), and the next vertex is where that
+follows from it by reflection or refraction (``gdlearn.shifts.halfvector.outgoing``, as the
+half-vector copy computes it), and the next vertex is where that
 ray meets the next chain shape. Only the analytic shapes are hit, not the scene: the caller checks
 the chain's visibility.
 
@@ -21,8 +21,8 @@ shrinks (Sec. 7). At a volume photon the traced end is the point of the last ray
 import math
 
 from gdlearn.kernels import vec
-from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric, refract_m
 from gdlearn.kernels.jit import block, inlined
+from gdlearn.shifts.halfvector import outgoing
 from gdlearn.shifts.manifold_shapes import SH_N, SH_P, SH_R, SH_TYPE, SHAPE_PLANE, _v3, shape_contains, shape_frame
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -56,24 +56,6 @@ def shape_hit(shapes, j, o, d):
     return math.inf
 
 
-@inlined
-def specular_out(wi, h, eta, refract):
-    """The direction leaving a vertex of half vector h (local frame; ``wi`` towards the previous
-    vertex), by reflection or refraction through relative index ``eta`` (int/ext): (wo, ok). Not ok
-    under total internal reflection or where the micro- and macrosurface disagree on a side."""
-    ci = vec.dot(wi, h)
-    if refract:
-        _, cos_t, _, eta_ti = fresnel_dielectric(ci, eta)
-        if cos_t == 0.0:
-            return ZERO3, False
-        wo = vec.normalize(refract_m(wi, h, cos_t, eta_ti))
-        side = wo[2] * wi[2] < 0.0
-    else:
-        wo = (2.0 * ci * h[0] - wi[0], 2.0 * ci * h[1] - wi[1], 2.0 * ci * h[2] - wi[2])
-        side = wo[2] * wi[2] > 0.0
-    return wo, side and ci * wi[2] > 0.0 and vec.dot(wo, h) * wo[2] > 0.0
-
-
 @block
 def traced_chain(x0, X, shapes, etas, refract, targets, k, Xt):
     """Xt[:k] <- the chain a light path from x0 through X[0] takes with every half vector at its
@@ -90,7 +72,7 @@ def traced_chain(x0, X, shapes, etas, refract, targets, k, Xt):
         if not hz2 > 0.0:
             return False, ZERO3
         wi = vec.to_local(vec.normalize(vec.sub(prev, x)), s, t, n)
-        wo, ok = specular_out(wi, (hx, hy, math.sqrt(hz2)), etas[j] if refract[j] else 1.0, refract[j])
+        wo, _, ok = outgoing(wi, (hx, hy, math.sqrt(hz2)), etas[j] if refract[j] else 1.0, refract[j])
         if not ok:
             return False, ZERO3
         w = vec.normalize(vec.to_world(wo, s, t, n))

@@ -114,8 +114,8 @@ class GBRE(BRE):
         super().__init__(scene, kernel=kernel, transport=transport, radii="fixed",
                          volume_radius_scale=volume_radius_scale, **options)
         self.shift, self.subsets = shift, bool(subsets)
-        self.walk = "relaxed" if relaxed_walk("gbre", walk) else "exact"
-        self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets, self.walk == "relaxed")
+        self.gp = gb.GbreParams(self.method, shift == "mixed", self.subsets, relaxed_walk("gbre", walk))
+        self.walk = walk
         self.wsub = subset_weights(self.n_half, self.subsets)
         self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 

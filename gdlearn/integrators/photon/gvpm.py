@@ -92,8 +92,8 @@ class GVPM(VPM):
                              "--radii (progressive per-pixel radii)")
         super().__init__(scene, transport=transport, radii="fixed", volume_radius_scale=volume_radius_scale, **options)
         self.shift = shift
-        self.walk = "relaxed" if relaxed_walk("gvpm", walk) else "exact"
-        self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed", self.walk == "relaxed")
+        self.gv = gg.GvpmParams(self.vparams.samples, shift == "mixed", relaxed_walk("gvpm", walk))
+        self.walk = walk
         self.mtab = manifold_table(scene, self.setup.sa)     # both parts walk specular chains
 
     def _gvpm(self, lp, vgrids, sample0, radius):
