@@ -56,6 +56,16 @@ the fog box's pass was 13 % slower with the packet's ``_shade`` IR-inlined into 
 gpt's surface pass 7-10 % slower with its next-event and offset-start steps IR-inlined; those stay
 leaves.
 
+The photon passes' camera kernels (G-VPM, G-BRE, the surface pass of their full images, VPM and the
+BRE) are row drivers on threads whose per-row and per-photon steps are IR-inlined: G-BRE's cold
+compile went from ~370 s to a fraction of it, and its pass got faster (benchmarks/README.md, "G-VPM's
+and G-BRE's cold compile"). One rule comes with it: numba releases an array after its *last use*,
+not at the end of the function, so an IR-inlined function must not borrow views
+(:func:`gdlearn.kernels.arrays.borrow`) of scratch its caller allocated and then stop using -- the
+owner is freed under the views, and another thread's rows reuse the memory. The function that
+borrows a row's scratch stays a call of its own, so the owners live until it returns
+(``gbre_gather._pixels``).
+
 Each decorator works bare (``@leaf``) and with extra numba options (``@block(fastmath=True)``).
 """
 from __future__ import annotations

@@ -57,15 +57,15 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.jit import block, inlined, rows
+from gdlearn.kernels.jit import block, inlined, ir_inline
 from gdlearn.kernels.media.medium import medium_params, transmittance
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.photons import bbh as bbh_mod
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
@@ -173,25 +173,36 @@ def shift_2d(sa, lp, v, o, d, o_off, d_off, t, s_off, stack):
     return True, TRANSLATED, f3, rl, w_in
 
 
-@block
 def gbre_rows(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out):
     """Every pixel's two camera samples (sample0 + hh) and their four shifts into ``out`` (a
     :class:`~gdlearn.integrators.photon.gvpm_gather.GvpmOut`); ``bbhs`` holds four hierarchies, (half 0, parity 0), (0, 1), (1, 0), (1, 1)
     -- without subsets each half's twice --, ``r`` is the pass's global radius, ``wsub`` (2 x 2) the
     subset weights per half and parity, ``mtab`` the specular shapes the manifold walk moves
-    (``gpt_surface.manifold.manifold_table``)."""
-    _gbre_rows(borrowed(sa), _borrow_rec(lp), bbhs[0], bbhs[1], bbhs[2], bbhs[3], mtab, r, prm, gp, wsub, seed, sample0,
-               GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
+    (``gpt_surface.manifold.manifold_table``). The rows run on threads (``kernels.threads.run_rows``),
+    not in a parallel kernel, and the steps below the row driver are IR-inlined into it: numba
+    compiles a function it does not IR-inline on its own and again inside every caller above it
+    (``kernels/jit.py``), and this pass's manifold walk made each of those levels cost 10-90 s of a
+    cold compile (benchmarks/README.md, "G-VPM's and G-BRE's cold compile")."""
+    run_rows(lambda counter, step: _gbre_rows(sa, lp, bbhs[0], bbhs[1], bbhs[2], bbhs[3], mtab, r, prm, gp, wsub, seed,
+                                              sample0, out, counter, step), out.bad.shape[0])
 
 
-@rows
-def _gbre_rows(sa, lp, b00, b01, b10, b11, mtab, r, prm, gp, wsub, seed, sample0, out):
-    for row in prange(out.bad.shape[0]):
-        y = np.int64(row)
-        out.bad[y] = _row(sa, lp, (b00, b01, b10, b11), mtab, r, prm, gp, wsub, seed, sample0, out, y)
+@block(nogil=True)
+def _gbre_rows(sa, lp, b00, b01, b10, b11, mtab, r, prm, gp, wsub, seed, sample0, out, counter, step):
+    """One thread's share of :func:`gbre_rows`: chunks of ``step`` rows taken from ``counter``."""
+    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+    sb, lb, ob = borrowed(sa), _borrow_rec(lp), GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count),
+                                                        borrow(out.bad))
+    h = out.bad.shape[0]
+    while True:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
+            return
+        for y in range(y0, y1):
+            ob.bad[y] = _row(sb, lb, (b00, b01, b10, b11), mtab, r, prm, gp, wsub, seed, sample0, ob, y)
 
 
-@block
+@ir_inline
 def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
     """Row y's scratch, allocated once, and the row's pixels (:func:`_pixels`)."""
     nmax = 1
@@ -209,7 +220,9 @@ def _row(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y):
 @block
 def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, scr):
     """Every pixel of row y, with the row's scratch borrowed (kernels/arrays.py: no reference count;
-    :func:`_row`'s arrays outlive this call). Counted, every inlined helper that receives an array
+    :func:`_row`'s arrays outlive this call). A call of its own, not IR-inlined into :func:`_row`:
+    inlined, the owning arrays would be released after their last use -- the borrowing --, and the
+    views would read freed memory (another thread's rows, seen as a nondeterministic pass). Counted, every inlined helper that receives an array
     increments and decrements its count atomically: ~30 % of the fog box's pass (perf, 48^2)."""
     hgt, w = out.m.shape[1], out.m.shape[2]
     nbad = 0
@@ -262,7 +275,7 @@ def _store_sums(out, hh, y, x, scr):
         out.count[hh, i, y, x] += scr.cnt[i]
 
 
-@block
+@ir_inline
 def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
     """The BRE along beam b (bre_beam's photons, kernel and random numbers) and every photon's four
     shifts, into the pixel half's sums: (photons counted, non-finite terms dropped)."""
@@ -310,7 +323,7 @@ def _beam(sa, lp, bbh, mtab, prm, gp, h, base, offs, film, r, ws, scr, stack):
     return cnt, nbad
 
 
-@inlined
+@ir_inline
 def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack, relax):
     """(ok, beta_b' / beta_b per channel, light-side density ratio, arrival direction at b', walked)
     of photon row v moved to b': unchanged for a null shift (T(y) = y), else reconnected from its
@@ -328,7 +341,7 @@ def _light_side(sa, lp, mtab, v, kind, b2, r, scr, stack, relax):
     return status == OK, f3, rl, w_in, walked
 
 
-@inlined
+@ir_inline
 def _shift_photon(sa, lp, mtab, v, gp, g, q, offs, pre, c_b, scr, stack):
     """Photon row v (base term c_b; ``pre`` = T(t) beta kernel weight, per channel; q = base beam
     (o, d), its index b, the photon's t, the radius and its chord half-length) shifted to the four

@@ -39,13 +39,13 @@ buffer *is* VPM's surface estimate and emission, :mod:`gdlearn.integrators.photo
 from __future__ import annotations
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.jit import block, ir_inline
 from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.photons import grid as hashgrid
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_path
@@ -72,21 +72,30 @@ def surface_pass(setup, lp, grids, mtab, prm, seed, sample0, radius):
 _shift_photons = make_shift_photons(photon_base, shift_from_base)
 
 
-@block
 def surface_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
-    """Every pixel's two base gather points (half hh queries grids[hh]) and their four shifts."""
-    _surface_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), borrow(mtab), prm,
-                  seed, sample0, radius, borrow_out(out))
+    """Every pixel's two base gather points (half hh queries grids[hh]) and their four shifts. The
+    rows run on threads (``kernels.threads.run_rows``) and the row is IR-inlined into their driver,
+    for the cold compile (:func:`gdlearn.integrators.photon.gbre_gather.gbre_rows` says why)."""
+    run_rows(lambda counter, step: _surface_rows(sa, lp, grids[0], grids[1], mtab, prm, seed, sample0, radius, out,
+                                                 counter, step), radius.shape[0])
 
 
-@rows
-def _surface_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out):
-    for row in prange(radius.shape[0]):
-        y = np.int64(row)           # one specialisation of _row (kernels/jit.py: prange's index type)
-        out.bad[y] = _row(sa, lp, (ga, gb), mtab, prm, seed, sample0, radius, out, y)
+@block(nogil=True)
+def _surface_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, step):
+    """One thread's share of :func:`surface_rows`: chunks of ``step`` rows taken from ``counter``."""
+    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+    sb, lb, grids, mb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb)), borrow(mtab), \
+        borrow_out(out)
+    h = radius.shape[0]
+    while True:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
+            return
+        for y in range(y0, y1):
+            ob.bad[y] = _row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
 
 
-@block
+@ir_inline
 def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
     hgt, w = radius.shape
     cam = sa.camera

@@ -52,15 +52,15 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.jit import block, inlined, rows
+from gdlearn.kernels.jit import block, inlined, ir_inline
 from gdlearn.kernels.media.medium import medium_params, sample_distance_truncated_1, transmittance
 from gdlearn.kernels.media.phase import hg_eval
 from gdlearn.kernels.rng import path_state, rand_at
+from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.photons.grid import query as grid_query
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, BEAM_W, MAX_BEAMS, \
@@ -110,23 +110,32 @@ def allocate(h: int, w: int) -> GvpmOut:
     return GvpmOut(np.zeros((2, 9, h, w, 3)), np.zeros((2, h, w)), np.zeros((2, N_COUNTS, h, w)), np.zeros(h, np.int64))
 
 
-@block
 def gvpm_rows(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out):
     """Every pixel's two camera samples (sample0 + hh; half hh gathers grids[hh]) and their four shifts
     into ``out`` (a :class:`GvpmOut`); ``radius`` (H x W) is the kernel radius per pixel, ``mtab`` the
-    specular shapes the manifold walk moves (``gpt_surface.manifold.manifold_table``)."""
-    _gvpm_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(grids[0]), _borrow_grid(grids[1]), mtab, prm, gv, seed,
-               sample0, radius, GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad)))
+    specular shapes the manifold walk moves (``gpt_surface.manifold.manifold_table``). The rows run
+    on threads (``kernels.threads.run_rows``), and the steps below the row driver are IR-inlined into
+    it, for the cold compile (:func:`gdlearn.integrators.photon.gbre_gather.gbre_rows` says why)."""
+    run_rows(lambda counter, step: _gvpm_rows(sa, lp, grids[0], grids[1], mtab, prm, gv, seed, sample0, radius, out,
+                                              counter, step), radius.shape[0])
 
 
-@rows
-def _gvpm_rows(sa, lp, ga, gb, mtab, prm, gv, seed, sample0, radius, out):
-    for row in prange(radius.shape[0]):
-        y = np.int64(row)           # one specialisation of _row (kernels/jit.py: prange's index type)
-        out.bad[y] = _row(sa, lp, (ga, gb), mtab, prm, gv, seed, sample0, radius, out, y)
+@block(nogil=True)
+def _gvpm_rows(sa, lp, ga, gb, mtab, prm, gv, seed, sample0, radius, out, counter, step):
+    """One thread's share of :func:`gvpm_rows`: chunks of ``step`` rows taken from ``counter``."""
+    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+    sb, lb, grids = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb))
+    ob = GvpmOut(borrow(out.phi), borrow(out.m), borrow(out.count), borrow(out.bad))
+    h = radius.shape[0]
+    while True:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
+            return
+        for y in range(y0, y1):
+            ob.bad[y] = _row(sb, lb, grids, mtab, prm, gv, seed, sample0, radius, ob, y)
 
 
-@block
+@ir_inline
 def _row(sa, lp, grids, mtab, prm, gv, seed, sample0, radius, out, y):
     hgt, w = radius.shape
     nbad = 0
@@ -229,7 +238,7 @@ def _offset_gather(offs, nb, b, t, sbar, pb, pdf, tr, k0, og):
         og[j, 11] = mis_weight_from_log_ratio(math.log(ratio))
 
 
-@block
+@ir_inline
 def _samples(sa, lp, grid, mtab, prm, gv, h, base, offs, film, r, scr, stack, out, hh, y, x):
     """VPM's K distance samples of one camera path, their photons and the photons' shifts. The
     offset camera paths and gather points are made only when a distance sample finds a photon:
@@ -277,7 +286,7 @@ def _finite(a, b, c):
     return math.isfinite(a) and math.isfinite(b) and math.isfinite(c)
 
 
-@inlined
+@ir_inline
 def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
     """The base: every admitted photon in Ball(dg, r), its term c_b = camera factor x rho x beta added
     to L (in a register, in photon order: the buffer's sum is the same as one write per photon) and
@@ -312,7 +321,7 @@ def _collect(lp, grid, prm, where, g, dg, dc, cw, r, scr, out, hh, y, x):
     return n, nbad
 
 
-@inlined
+@ir_inline
 def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv, og, stack, out, hh, y, x):
     """The photons of one distance sample (scratch rows 0..n) shifted to the four neighbours' gather
     points og[j], photon by photon: a photon's recorded edge and specular chain are built once for
@@ -343,7 +352,7 @@ def _shift_photons(sa, lp, mtab, scr, n, dg, g, r, gv, og, stack, out, hh, y, x)
     return nbad
 
 
-@inlined
+@ir_inline
 def _shift_one(sa, lp, mtab, scr, i, v, dg, g, r, gv, og, j, stack):
     """Photon v (scratch row i, base term scr.cb[i]) shifted to neighbour j's gather point og[j]:
     its terms and outcome added to the sums (:func:`add_shift`). Returns the non-finite terms

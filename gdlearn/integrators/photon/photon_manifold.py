@@ -46,7 +46,7 @@ import numpy as np
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_delta_only
 from gdlearn.kernels.geometry import INFO_EMITTER, offset_origin
-from gdlearn.kernels.jit import block, inlined
+from gdlearn.kernels.jit import block, ir_inline
 from gdlearn.kernels.vec import coordinate_system, dot, to_local
 from gdlearn.photons.records import F_DELTA_OUT, K_SURFACE
 from gdlearn.integrators.path.gpt_surface.manifold import POS_TOL, _same_row
@@ -353,7 +353,7 @@ def volume_chain(sa, lp, mtab, v, edge, ch):
         ch.det[0] = det_b
 
 
-@block
+@ir_inline
 def shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax):
     """Shift the volume photon row v, whose parent a = y_{s-1} lies on the specular chain ``ch``
     (:func:`volume_chain`, state CHAIN_OK), to ``b_off`` (module docstring). Returns what
@@ -420,7 +420,7 @@ def manifold_volume_photon(sa, lp, mtab, v, b_off, edge, r, stack, relax):
     return shift_volume_chain(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax)
 
 
-@inlined
+@ir_inline
 def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax):
     """The light subpath of volume photon row v moved to ``b_off`` (Gruson et al. 2018, Sec. 4.3):
     reconnected from its parent (:func:`gdlearn.integrators.photon.gvpm_light.reconnect_edge`), or,
@@ -428,8 +428,9 @@ def complete_volume_photon(sa, lp, mtab, v, b_off, edge, r, ch, stack, relax):
     ``ch``, built at the first neighbour that needs it (the caller sets ch.state[0] to
     CHAIN_UNKNOWN for each new photon). Returns reconnect_edge's tuple and whether the walk
     completed it; ``relax`` = (the offset gather point d', the relaxed walk's radius, 0 for the exact
-    walk): :func:`shift_volume_chain`. Inlined: G-VPM's and G-BRE's camera passes call it per photon
-    and neighbour."""
+    walk): :func:`shift_volume_chain`. IR-inlined, as :func:`shift_volume_chain`: G-VPM's and
+    G-BRE's camera passes call it once, per photon and neighbour, and each level numba compiles on its
+    own is compiled again inside every caller (``kernels/jit.py``)."""
     status, f3, rl, w_in = reconnect_edge(sa, lp, v, b_off, stack, edge)
     if status != FAIL_SPECULAR:
         return status, f3, rl, w_in, False
