@@ -22,13 +22,13 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import prange
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.rng import path_state, rand_at
-from gdlearn.kernels.jit import block, rows
+from gdlearn.kernels.threads import next_rows, run_rows
+from gdlearn.kernels.jit import block, ir_inline
 from gdlearn.photons.trace import _borrow_rec
 from gdlearn.kernels.media.medium import medium_params, sample_distance_truncated_1
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, BEAM_D, BEAM_MED, BEAM_O, BEAM_S, MAX_BEAMS, beam_path
@@ -64,13 +64,14 @@ def new_out(h: int, w: int) -> VolumeOut:
     return VolumeOut(z3(), z(), z3(), z(), np.zeros(h, np.int64), z3(), z(), np.full((2, h, w, 3), np.nan))
 
 
-@block
 def gather_rows(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf, r_vol, out):
     """Every pixel's two camera samples into ``out``; ``r_surf``, ``r_vol`` (H x W) are the
-    surface and VPM radii per pixel, ``radius`` the BRE radius per light-vertex row."""
-    _gather_rows(borrowed(sa), _borrow_rec(lp), _borrow_grid(sgrids[0]), _borrow_grid(sgrids[1]),
-                 _borrow_grid(vgrids[0]), _borrow_grid(vgrids[1]), bbhs[0], bbhs[1], borrow(radius), gprm, vprm,
-                 seed, sample0, r_surf, r_vol, _out(out))
+    surface and VPM radii per pixel, ``radius`` the BRE radius per light-vertex row. The rows run on
+    threads in dynamic chunks (``kernels.threads.run_rows``), as G-VPM's and G-BRE's camera passes
+    do, so the primal and the gradient estimators are timed on the same footing."""
+    run_rows(lambda counter, step: _gather_rows(sa, lp, sgrids[0], sgrids[1], vgrids[0], vgrids[1], bbhs[0], bbhs[1],
+                                                radius, gprm, vprm, seed, sample0, r_surf, r_vol, out, counter, step),
+             r_surf.shape[0])
 
 
 @block
@@ -79,14 +80,23 @@ def _out(o):
                      borrow(o.mv), borrow(o.probe))
 
 
-@rows
-def _gather_rows(sa, lp, sga, sgb, vga, vgb, bba, bbb, radius, gprm, vprm, seed, sample0, r_surf, r_vol, out):
-    for y in prange(r_surf.shape[0]):
-        out.bad[y] = _row(sa, lp, (sga, sgb), (vga, vgb), (bba, bbb), radius, gprm, vprm, seed, sample0, r_surf,
-                          r_vol, out, y)
+@block(nogil=True)
+def _gather_rows(sa, lp, sga, sgb, vga, vgb, bba, bbb, radius, gprm, vprm, seed, sample0, r_surf, r_vol, out, counter,
+                 step):
+    """One thread's share of :func:`gather_rows`: chunks of ``step`` rows taken from ``counter``."""
+    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+    sb, lb, sgrids, vgrids, rb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(sga), _borrow_grid(sgb)), \
+        (_borrow_grid(vga), _borrow_grid(vgb)), borrow(radius), _out(out)
+    h = r_surf.shape[0]
+    while True:
+        y0, y1 = next_rows(counter, step, h)
+        if y0 == y1:
+            return
+        for y in range(y0, y1):
+            ob.bad[y] = _row(sb, lb, sgrids, vgrids, (bba, bbb), rb, gprm, vprm, seed, sample0, r_surf, r_vol, ob, y)
 
 
-@block
+@ir_inline
 def _row(sa, lp, sgrids, vgrids, bbhs, radius, gprm, vprm, seed, sample0, r_surf, r_vol, out, y):
     w = r_surf.shape[1]
     nbad = 0
