@@ -222,8 +222,9 @@ def _pixels(sa, lp, bbhs, mtab, r, prm, gp, wsub, seed, sample0, out, y, work, s
     """Every pixel of row y, with the row's scratch borrowed (kernels/arrays.py: no reference count;
     :func:`_row`'s arrays outlive this call). A call of its own, not IR-inlined into :func:`_row`:
     inlined, the owning arrays would be released after their last use -- the borrowing --, and the
-    views would read freed memory (another thread's rows, seen as a nondeterministic pass). Counted, every inlined helper that receives an array
-    increments and decrements its count atomically: ~30 % of the fog box's pass (perf, 48^2)."""
+    views would read freed memory (another thread's rows, seen as a nondeterministic pass). Counted,
+    every inlined helper that receives an array increments and decrements its count atomically: ~30 %
+    of the fog box's pass (perf, 48^2)."""
     hgt, w = out.m.shape[1], out.m.shape[2]
     nbad = 0
     stack, beams, bstate = borrow(work[0]), borrow(work[1]), borrow(work[2])
