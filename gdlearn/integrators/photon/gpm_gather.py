@@ -163,8 +163,7 @@ def gpm_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     four shifts into ``out`` (a :class:`GpmOut`); ``radius`` (H x W) is the kernel radius per pixel;
     ``mtab`` the manifold shape rows of the primitives (the manifold branch's chains). The rows run
     on threads (``kernels.threads.run_rows``): no parallel kernel to compile."""
-    run_rows(lambda counter, step: _gpm_rows(sa, lp, grids[0], grids[1], mtab, prm, seed, sample0, radius, out,
-                                             counter, step), radius.shape[0])
+    _gpm_pass(sa, lp, grids, mtab, prm, seed, sample0, radius, out)
 
 
 @block
@@ -173,19 +172,34 @@ def borrow_out(o):
     return GpmOut(borrow(o.phi), borrow(o.le), borrow(o.m), borrow(o.foot), borrow(o.count), borrow(o.bad))
 
 
-@block(nogil=True)
-def _gpm_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, step):
-    """One thread's share of :func:`gpm_rows`: chunks of ``step`` rows taken from ``counter``."""
-    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
-    sb, lb, grids, mb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb)), borrow(mtab), \
-        borrow_out(out)
-    h = radius.shape[0]
-    while True:
-        y0, y1 = next_rows(counter, step, h)
-        if y0 == y1:
-            return
-        for y in range(y0, y1):
-            ob.bad[y] = _gpm_row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
+def threaded_rows(row):
+    """A camera pass with GPM's arguments over the whole image, its rows on threads in chunks
+    (``kernels.threads.run_rows``): ``row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y)``
+    renders row y into ``out`` (a :class:`GpmOut`) and returns the non-finite terms it dropped; the
+    returned ``rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out)`` runs it over every row.
+    GPM's pass and the surface pass of G-VPM's and G-BRE's full images
+    (``gvol_surface.surface_rows``) share it; a ``row`` declared ``ir_inline`` is inlined into the
+    threads' driver (numba inlines a closure's compiled function as it does a global)."""
+
+    @block(nogil=True)
+    def each_row(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, step):
+        """One thread's share: chunks of ``step`` rows taken from ``counter``."""
+        # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
+        sb, lb, grids, mb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb)), borrow(mtab), \
+            borrow_out(out)
+        h = radius.shape[0]
+        while True:
+            y0, y1 = next_rows(counter, step, h)
+            if y0 == y1:
+                return
+            for y in range(y0, y1):
+                ob.bad[y] = row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
+
+    def rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
+        run_rows(lambda counter, step: each_row(sa, lp, grids[0], grids[1], mtab, prm, seed, sample0, radius, out,
+                                                counter, step), radius.shape[0])
+
+    return rows
 
 
 @block
@@ -235,3 +249,5 @@ def _gpm_row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
                                    offs, acc, stack)
     return nbad
 
+
+_gpm_pass = threaded_rows(_gpm_row)

@@ -41,16 +41,13 @@ from __future__ import annotations
 import numpy as np
 
 from gdlearn.kernels.accel.bvh import STACK_SIZE
-from gdlearn.kernels.arrays import borrow, borrowed
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.jit import block, ir_inline
 from gdlearn.kernels.rng import path_state, rand_at
-from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.photons import grid as hashgrid
-from gdlearn.photons.trace import _borrow_rec
 from gdlearn.integrators.photon.camera_beams import BEAM_COLS, MAX_BEAMS, beam_path
-from gdlearn.integrators.photon.gather import _borrow_grid, pixel_angle
-from gdlearn.integrators.photon.gpm_gather import allocate, borrow_out
+from gdlearn.integrators.photon.gather import pixel_angle
+from gdlearn.integrators.photon.gpm_gather import allocate, threaded_rows
 from gdlearn.integrators.photon.gvol_surface_light import photon_base, shift_from_base
 from gdlearn.integrators.photon.photon_shift_loop import FAILED, MANIFOLD, RECONNECTED, finite3, make_shift_photons, \
     offset_points, put, store_offset
@@ -75,24 +72,9 @@ _shift_photons = make_shift_photons(photon_base, shift_from_base)
 def surface_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out):
     """Every pixel's two base gather points (half hh queries grids[hh]) and their four shifts. The
     rows run on threads (``kernels.threads.run_rows``) and the row is IR-inlined into their driver,
-    for the cold compile (:func:`gdlearn.integrators.photon.gbre_gather.gbre_rows` says why)."""
-    run_rows(lambda counter, step: _surface_rows(sa, lp, grids[0], grids[1], mtab, prm, seed, sample0, radius, out,
-                                                 counter, step), radius.shape[0])
-
-
-@block(nogil=True)
-def _surface_rows(sa, lp, ga, gb, mtab, prm, seed, sample0, radius, out, counter, step):
-    """One thread's share of :func:`surface_rows`: chunks of ``step`` rows taken from ``counter``."""
-    # borrowed views: no atomic reference counts shared by the threads (kernels.arrays.borrow)
-    sb, lb, grids, mb, ob = borrowed(sa), _borrow_rec(lp), (_borrow_grid(ga), _borrow_grid(gb)), borrow(mtab), \
-        borrow_out(out)
-    h = radius.shape[0]
-    while True:
-        y0, y1 = next_rows(counter, step, h)
-        if y0 == y1:
-            return
-        for y in range(y0, y1):
-            ob.bad[y] = _row(sb, lb, grids, mb, prm, seed, sample0, radius, ob, y)
+    for the cold compile (:func:`gdlearn.integrators.photon.gbre_gather.gbre_rows` says why), by GPM's
+    driver (:func:`gdlearn.integrators.photon.gpm_gather.threaded_rows`)."""
+    _surface_pass_rows(sa, lp, grids, mtab, prm, seed, sample0, radius, out)
 
 
 @ir_inline
@@ -131,6 +113,9 @@ def _row(sa, lp, grids, mtab, prm, seed, sample0, radius, out, y):
             nbad += _shift_photons(sa, lp, mtab, prm, out, hh, y, x, (p, ng, frame, wi, mid, beta, state, m), r, cand,
                                    n, offs, acc, stack)
     return nbad
+
+
+_surface_pass_rows = threaded_rows(_row)
 
 
 @block
