@@ -58,8 +58,8 @@ leaves.
 
 The photon passes' camera kernels (G-VPM, G-BRE, the surface pass of their full images, VPM and the
 BRE) are row drivers on threads whose per-row and per-photon steps are IR-inlined: G-BRE's cold
-compile went from ~370 s to a fraction of it, and its pass got faster (benchmarks/README.md, "G-VPM's
-and G-BRE's cold compile"). One rule comes with it: numba releases an array after its *last use*,
+compile went from 372 to 123 s, G-VPM's from 388 to 120 s, and G-BRE's pass got faster
+(benchmarks/README.md, "G-VPM's and G-BRE's cold compile"). One rule comes with it: numba releases an array after its *last use*,
 not at the end of the function, so an IR-inlined function must not borrow views
 (:func:`gdlearn.kernels.arrays.borrow`) of scratch its caller allocated and then stop using -- the
 owner is freed under the views, and another thread's rows reuse the memory. The function that
