@@ -257,29 +257,65 @@ def test_singular_system_is_reported():
     assert np.allclose(B[:, 0], np.linalg.solve(A, [3.0, 5.0]))
 
 
+def _fd_derivatives(x_b, X, x_c, n_c, sc, targets, h=1e-5):
+    """A = dC/dX and B = dC/dx_c by fourth-order central differences of M.constraints, each chain
+    vertex moved in its own chart (M.shape_chart), x_c in the plane of normal n_c: the oracle of
+    M.constraint_jacobian. Truncation ~h^4 |C^(5)| and round-off ~1e-16 / h: ~1e-11 here."""
+    k, m = sc.k, 2 * sc.k
+    se, te = np.array(M.vec.coordinate_system(T(n_c)))
+
+    def c_at(j, a, d):
+        Xp, xe = X.copy(), np.asarray(x_c, float)
+        if j < k:
+            Xp[j] = M.shape_chart(sc.rows, j, T(X[j]), d if a == 0 else 0.0, d if a == 1 else 0.0)
+        else:
+            xe = xe + (se if a == 0 else te) * d
+        out = np.empty(m)
+        assert M.constraints(T(x_b), Xp, T(xe), sc.rows, sc.etas, sc.refract, targets, k, out)
+        return out
+
+    cols = [(-c_at(j, a, 2 * h) + 8 * c_at(j, a, h) - 8 * c_at(j, a, -h) + c_at(j, a, -2 * h)) / (12 * h)
+            for j in range(k + 1) for a in range(2)]
+    D = np.array(cols).T
+    return D[:, :m], D[:, m:]
+
+
 @pytest.mark.parametrize("name", list(SCENES))
-def test_walk_step_matrix_matches_central_differences(name):
-    """A walk step's A = dC/dX (forward differences, M.walk_jacobian) against the central differences
-    the shift's Jacobian uses (M.constraint_derivatives) on random base chains of every test scene.
-    Forward differences at 1e-8 of the chain's length are good to ~1e-8 of A's scale (truncation and
-    round-off alike); central ones to ~1e-10. 1e-6 of the largest entry leaves two orders of margin
-    and still fails a wrong step, a swapped column or a missed chart move (errors of order 1)."""
+def test_constraint_derivatives_match_finite_differences(name):
+    """M.constraint_jacobian's closed-form A = dC/dX and B = dC/dx_c against fourth-order central
+    differences of the constraints (_fd_derivatives), on random base chains of every test scene
+    and on the same chains moved off the solution (each vertex by up to 0.05 in its chart, so h is
+    no longer the normal and a sphere's turning frame counts in full). Agreement is ~1e-10 of the
+    largest entry; 1e-7 leaves three orders of margin and fails any missing term: a sphere's frame
+    change dropped, the k factor of w_o, a sign of dw, or a neighbour's column (errors of order 1)."""
     rng = np.random.default_rng(7 + sum(map(ord, name)))
     sc, cfgs = _configs(name, rng, 10)
+    checked = 0
     for x_b, x1, _ in cfgs:
         chain, x_c = sc.trace_chain(x_b, x1)
-        X = np.array(chain, float)
         k, m = sc.k, 2 * sc.k
+        n_c = np.asarray(sc.end.normal(x_c), float)
         targets = np.zeros((k, 2))
-        assert M.half_vector_targets(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, k, targets)
-        C = np.empty(m)
-        assert M.constraints(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, targets, k, C)
-        A_walk, A_ref, B = np.empty((m, m)), np.empty((m, m)), np.empty((m, 2))
-        assert M.walk_jacobian(T(x_b), X, T(x_c), sc.rows, sc.etas, sc.refract, targets, k, C, A_walk,
-                               np.empty((k, 3)), np.empty(m))
-        assert M.constraint_derivatives(T(x_b), X, T(x_c), (0.0, 0.0, 1.0), sc.rows, sc.etas, sc.refract, targets,
-                                        k, A_ref, B)
-        assert np.max(np.abs(A_walk - A_ref)) <= 1e-6 * np.max(np.abs(A_ref)), name
+        assert M.half_vector_targets(T(x_b), np.array(chain, float), T(x_c), sc.rows, sc.etas, sc.refract, k, targets)
+        for off in (False, True):
+            X = np.array(chain, float)
+            if off:
+                for j in range(k):
+                    X[j] = M.shape_chart(sc.rows, j, T(X[j]), *rng.uniform(-0.05, 0.05, 2))
+            A, B = np.empty((m, m)), np.empty((m, 2))
+            if not M.constraint_jacobian(T(x_b), X, T(x_c), T(n_c), sc.rows, sc.etas, sc.refract, k, A, B, True):
+                assert off, name                     # a base chain is always valid
+                continue
+            A_fd, B_fd = _fd_derivatives(x_b, X, x_c, n_c, sc, targets)
+            scale = max(np.max(np.abs(A_fd)), np.max(np.abs(B_fd)))
+            assert np.max(np.abs(A - A_fd)) <= 1e-7 * scale, (name, off)
+            assert np.max(np.abs(B - B_fd)) <= 1e-7 * scale, (name, off)
+            # without B, A alone is the same
+            A2 = np.empty((m, m))
+            assert M.constraint_jacobian(T(x_b), X, T(x_c), T(n_c), sc.rows, sc.etas, sc.refract, k, A2, A2, False)
+            assert np.array_equal(A2, A)
+            checked += 1
+    assert checked >= 15, name
 
 
 def _moved_end(sc, x_b, x1, step):

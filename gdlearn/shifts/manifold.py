@@ -25,11 +25,12 @@ Jacobian (specular chain, GPM Eq. 7-8): the base path's free variable is x_1 (sa
 offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fixed) * |dx_c/dx_1|
 (base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
 theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
-G(x_b .. x_c) / G(x_b, x_1). For the Jacobian, A and B are central differences of the constraint
-function (step 1e-6 x the chain's length scale: relative error ~1e-10 from truncation and ~1e-10
-from round-off), which replaces Jakob's analytic second-order surface derivatives. A walk's step
-takes A alone by forward differences (:func:`walk_jacobian`: a third of the constraint evaluations
-for k = 2; Newton's convergence does not need A's last digits).
+G(x_b .. x_c) / G(x_b, x_1). A and B are the constraints' derivatives in closed form
+(:func:`constraint_jacobian`, as Jakob & Marschner 2012 take them, written out for the two shapes: a
+plane's frame is fixed, a sphere's turns with its normal), exact to round-off, for the walk's steps
+and for Eq. 8 alike. (Finite differences took 4(k + 1) evaluations of the constraints for A and
+B, 2k for a step's A; in closed form G-BRE's walks on the volume caustic take a quarter less time,
+benchmarks/README.md, "The walk's derivatives in closed form".)
 
 Geometry of the chain: each chain vertex lies on an analytic surface given as a row of ``shapes``
 (``SH_*`` columns): a plane quad (point, normal, two tangent axes, half extents; +-inf for an
@@ -55,10 +56,7 @@ from gdlearn.shifts.manifold_shapes import (SH_EXT, SH_N, SH_P, SH_R, SH_TYPE, S
 MAX_ITER = 5
 MAX_HALVINGS = 10
 TOL = 1e-12
-FD_REL_STEP = 1e-6
-#: a walk step's forward differences: ~sqrt(machine epsilon), where truncation and round-off are
-#: both ~1e-8 of A (:func:`walk_jacobian`)
-WALK_FD_REL_STEP = 1e-8
+_ZERO = (0.0, 0.0, 0.0)
 
 
 @inlined
@@ -139,67 +137,103 @@ def chain_length_scale(x0, X, xe, k):
     return total / (k + 1)
 
 
-@block
-def constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, B):
-    """A = dC/dX (2k x 2k, chart coordinates of each chain vertex) and B = dC/dx_e (2k x 2, tangent
-    plane of x_e with normal ne), by central differences. False if a probe is invalid."""
-    m = 2 * k
-    h = FD_REL_STEP * chain_length_scale(x0, X, xe, k)
-    if not (h > 0.0 and math.isfinite(h)):
-        return False                        # a collapsed or non-finite chain
-    Xp = X.copy()
-    cp = np.empty(m)
-    cm = np.empty(m)
-    for j in range(k + 1):
-        for a in range(2):
-            for sgn in range(2):
-                d = h if sgn == 0 else -h
-                u, v = (d, 0.0) if a == 0 else (0.0, d)
-                xe_p = xe
-                if j < k:
-                    Xp[:] = X
-                    p = shape_chart(shapes, j, _v3(X, j, 0), u, v)
-                    Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
-                else:
-                    Xp[:] = X
-                    s, t = vec.coordinate_system(ne)
-                    xe_p = vec.add(xe, vec.add(vec.scale(s, u), vec.scale(t, v)))
-                ok = constraints(x0, Xp, xe_p, shapes, etas, refract, targets, k,
-                                 cp if sgn == 0 else cm)
-                if not ok:
-                    return False
-            for r in range(m):
-                g = (cp[r] - cm[r]) / (2.0 * h)
-                if j < k:
-                    A[r, 2 * j + a] = g
-                else:
-                    B[r, a] = g
-    return True
+@inlined
+def _frame_change(shapes, j, n, e):
+    """(ds, dt): the first-order change of vertex j's frame (s, t) = ``vec.coordinate_system(n)``
+    when the vertex moves by the tangent vector e. A plane's frame is fixed; on a sphere dn = e / R,
+    and (s, t) is Duff et al. 2017's basis, a rational function of n differentiated term by term
+    (a = -1 / (sign + n_z), b = n_x n_y a)."""
+    if int(shapes[j, SH_TYPE]) == SHAPE_PLANE:
+        return _ZERO, _ZERO
+    rr = shapes[j, SH_R]
+    dn = (e[0] / rr, e[1] / rr, e[2] / rr)
+    sign = math.copysign(1.0, n[2])
+    a = -1.0 / (sign + n[2])
+    da = a * a * dn[2]
+    db = (dn[0] * n[1] + n[0] * dn[1]) * a + n[0] * n[1] * da
+    ds = (sign * (2.0 * n[0] * dn[0] * a + n[0] * n[0] * da), sign * db, -sign * dn[0])
+    dt = (db, 2.0 * n[1] * dn[1] * a + n[1] * n[1] * da, -dn[1])
+    return ds, dt
+
+
+@inlined
+def _transverse(w, e, scale):
+    """scale (e - w (w . e)): the change of the unit vector w = v / |v| when v moves by e, times
+    scale |v| (d normalize(v) = (I - w w^T) dv / |v|)."""
+    we = vec.dot(w, e)
+    return ((e[0] - w[0] * we) * scale, (e[1] - w[1] * we) * scale, (e[2] - w[2] * we) * scale)
+
+
+@inlined
+def _put_dc(M_, r, col, h, f, s, t, dH, ds, dt):
+    """Rows r, r + 1 of column ``col`` of M_: the change of c = (h . s, h . t) for a change dH of
+    H = w_i + k w_o and (ds, dt) of the frame; h = sigma H / |H|, so dh = f (dH - h (h . dH)) with
+    f = sigma / |H|."""
+    hd = vec.dot(h, dH)
+    dh = ((dH[0] - h[0] * hd) * f, (dH[1] - h[1] * hd) * f, (dH[2] - h[2] * hd) * f)
+    M_[r, col] = vec.dot(dh, s) + vec.dot(h, ds)
+    M_[r + 1, col] = vec.dot(dh, t) + vec.dot(h, dt)
 
 
 @block
-def walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xp, cp):
-    """The Newton matrix A = dC/dX of a walk step by forward differences from C = C(X), into A; Xp
-    (k x 3) and cp (2k) are scratch. A step needs no endpoint columns B and no second-order
-    accuracy: an error of ~1e-8 in A only adds a linear term ~1e-8 |C| to Newton's quadratic
-    convergence, and the walk's tolerance is on C itself. That is 2k constraint evaluations a
-    step instead of central differences' 4(k + 1). (The Jacobian of the shift, Eq. 8, keeps
-    central differences: :func:`chain_endpoint_det`.) False if a probe is invalid."""
+def constraint_jacobian(x0, X, xe, ne, shapes, etas, refract, k, A, B, with_b):
+    """A = dC/dX (2k x 2k: each chain vertex in its chart, the chart's axes being its frame's s, t)
+    and, ``with_b``, B = dC/dx_e (2k x 2: x_e in the plane of normal ne, axes
+    ``vec.coordinate_system(ne)``), in closed form. False where :func:`constraints` would be invalid.
+
+    c_j = (h_j . s_j, h_j . t_j) - o_j depends on x_{j-1}, x_j and x_{j+1} only (A is block
+    tridiagonal, as in Jakob & Marschner 2012). With w_i = (x_{j-1} - x_j) / l_i,
+    w_o = (x_{j+1} - x_j) / l_o, H = w_i + k w_o (k = 1, or the refraction's eta ratio) and
+    h = sigma H / |H|: dh = (sigma / |H|) (I - h h^T) dH, dw = (I - w w^T) dx / l, and moving x_j itself
+    also turns a sphere's frame (:func:`_frame_change`). The targets o_j are constants. Checked
+    against fourth-order central differences of :func:`constraints` (tests/test_shifts_manifold.py)."""
     m = 2 * k
-    h = WALK_FD_REL_STEP * chain_length_scale(x0, X, xe, k)
-    if not (h > 0.0 and math.isfinite(h)):
-        return False                        # a collapsed or non-finite chain
-    Xp[:] = X
+    for r in range(m):
+        for c in range(m):
+            A[r, c] = 0.0
+        if with_b:
+            B[r, 0] = 0.0
+            B[r, 1] = 0.0
     for j in range(k):
         xj = _v3(X, j, 0)
+        if not shape_contains(shapes, j, xj):
+            return False
+        prev = x0 if j == 0 else _v3(X, j - 1, 0)
+        nxt = xe if j == k - 1 else _v3(X, j + 1, 0)
+        s, t, n = shape_frame(shapes, j, xj)
+        vi, vo = vec.sub(prev, xj), vec.sub(nxt, xj)
+        li, lo = vec.norm(vi), vec.norm(vo)
+        if not (li > 0.0 and lo > 0.0):
+            return False
+        wi, wo = vec.normalize(vi), vec.normalize(vo)
+        wi_l, wo_l = vec.to_local(wi, s, t, n), vec.to_local(wo, s, t, n)
+        side = wi_l[2] * wo_l[2]
+        if (refract[j] and not side < 0.0) or (not refract[j] and not side > 0.0):
+            return False
+        hl, kk, ok = half_vector(wi_l, wo_l, etas[j] if refract[j] else 1.0)
+        if not ok or not (vec.dot(wi_l, hl) * wi_l[2] > 0.0 and vec.dot(wo_l, hl) * wo_l[2] > 0.0):
+            return False
+        h = vec.to_world(hl, s, t, n)
+        H = (wi[0] + kk * wo[0], wi[1] + kk * wo[1], wi[2] + kk * wo[2])
+        f = vec.dot(h, H) / vec.dot(H, H)                      # sigma / |H|
+        r = 2 * j
         for a in range(2):
-            p = shape_chart(shapes, j, xj, h if a == 0 else 0.0, h if a == 1 else 0.0)
-            Xp[j, 0], Xp[j, 1], Xp[j, 2] = p[0], p[1], p[2]
-            if not constraints(x0, Xp, xe, shapes, etas, refract, targets, k, cp):
-                return False
-            for r in range(m):
-                A[r, 2 * j + a] = (cp[r] - C[r]) / h
-        Xp[j, 0], Xp[j, 1], Xp[j, 2] = xj[0], xj[1], xj[2]
+            e = s if a == 0 else t                             # x_j moves along its own chart
+            gi, go = _transverse(wi, e, -1.0 / li), _transverse(wo, e, -kk / lo)
+            ds, dt = _frame_change(shapes, j, n, e)
+            _put_dc(A, r, r + a, h, f, s, t, vec.add(gi, go), ds, dt)
+        if j > 0:                                              # x_{j-1} moves along its chart
+            sp, tp, _ = shape_frame(shapes, j - 1, prev)
+            for a in range(2):
+                _put_dc(A, r, r - 2 + a, h, f, s, t, _transverse(wi, sp if a == 0 else tp, 1.0 / li), _ZERO, _ZERO)
+        if j < k - 1:
+            sn, tn, _ = shape_frame(shapes, j + 1, nxt)
+            for a in range(2):
+                _put_dc(A, r, r + 2 + a, h, f, s, t, _transverse(wo, sn if a == 0 else tn, kk / lo), _ZERO, _ZERO)
+        elif with_b:                                           # x_e moves in the plane of normal ne
+            se, te = vec.coordinate_system(ne)
+            for a in range(2):
+                _put_dc(B, r, a, h, f, s, t, _transverse(wo, se if a == 0 else te, kk / lo), _ZERO, _ZERO)
     return True
 
 
@@ -239,11 +273,11 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
     for it in range(max_iter):
         if r < tol:
             return True, it, r
-        # Xn, Cn serve as the relaxed test's and the probes' scratch until the step below fills them
+        # Xn serves as the relaxed test's scratch until the step below fills it
         if relax is not None:
             if _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xn):
                 return True, it, r
-        if not walk_jacobian(x0, X, xe, shapes, etas, refract, targets, k, C, A, Xn, Cn):
+        if not constraint_jacobian(x0, X, xe, xe, shapes, etas, refract, k, A, A, False):
             return False, it, r
         for i in range(m):
             dX[i, 0] = -C[i]
@@ -287,7 +321,7 @@ def endpoint_sensitivity(x0, X, xe, ne, shapes, etas, refract, targets, k, A, S)
     chain per chart coordinate of x_e in the plane of normal ne), which :func:`predicted_start`
     takes; A (2k x 2k) is scratch."""
     m = 2 * k
-    if not constraint_derivatives(x0, X, xe, ne, shapes, etas, refract, targets, k, A, S):
+    if not constraint_jacobian(x0, X, xe, ne, shapes, etas, refract, k, A, S, True):
         return 0.0, False
     if not solve_linear(A, S, m, 2):
         return 0.0, False
