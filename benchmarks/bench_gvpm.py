@@ -27,7 +27,9 @@ resolution, the budget and the sources of its pipeline (so an edit of the G-VPM 
 volume radius, e.g. ``vpm@0.35``): G-BRE's study is ``--methods
 bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-frame copy; photon
 subsets on; bre-2d is there too; ``gvpm-relaxed+l1``, ``gbre-relaxed+l1`` and their l2 twins walk
-volume photons' chains relaxed, Gruson et al. 2018 Sec. 6.1). Prints each method's final relMSE per seed, the ratio base /
+volume photons' chains relaxed, Gruson et al. 2018 Sec. 6.1; ``gvpm+cv``, ``gvpm+cv-weighted``,
+``gbre+cv``, ``gbre+cv-weighted`` reconstruct by (weighted) control variates instead,
+:mod:`gdlearn.experiments.solvers`). Prints each method's final relMSE per seed, the ratio base /
 method (> 1: lower error than the base), its mean, min and max over the seeds, and the same with
 the reference's noise floor subtracted
 from both errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R).
@@ -240,6 +242,10 @@ def methods(a, extra=()) -> dict:
              "gbre+l1": Method("gbre+l1", "gbre", "l1", opts + k3 + (("shift", "mixed"),)),
              "gbre+l2": Method("gbre+l2", "gbre", "l2", opts + k3 + (("shift", "mixed"),)),
              "gbre-2d+l1": Method("gbre-2d+l1", "gbre", "l1", opts + k2)}
+    for est in ("gvpm", "gbre"):     # the other reconstructions of experiments.solvers
+        for sol in ("cv", "cv-weighted"):
+            m = every[f"{est}+l1"]
+            every[f"{est}+{sol}"] = Method(f"{est}+{sol}", m.estimator, sol, m.options)
     for name in ("gvpm+l1", "gvpm+l2", "gbre+l1", "gbre+l2"):     # Gruson et al.'s relaxed walk, not the exact one
         est, _, sol = name.partition("+")
         m = every[name]
