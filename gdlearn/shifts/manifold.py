@@ -26,7 +26,7 @@ offset's is x'_1. With x_c shared, |dx'_1/dx_1| = |dx'_1/dx_c| (offset, x'_b fix
 (base, x_b fixed) = |det D'| / |det D|, where D = dx_1/dx_c = rows of -A^-1 B (implicit function
 theorem on C(X; x_c) = 0, B = dC/dx_c). |det D| is the ratio of geometry terms of Eq. 8,
 G(x_b .. x_c) / G(x_b, x_1). A and B are the constraints' derivatives in closed form
-(:mod:`gdlearn.shifts.manifold_derivatives`: a plane's frame is fixed, a sphere's turns with its
+(:mod:`gdlearn.shifts.manifold_constraints`: a plane's frame is fixed, a sphere's turns with its
 normal), exact to round-off, for the walk's steps and for Eq. 8 alike. (Finite differences took
 4(k + 1) evaluations of the constraints for A and B, 2k for a step's A; in closed form G-BRE's
 walks on the volume caustic take a quarter less time, benchmarks/README.md, "The walk's
@@ -48,7 +48,7 @@ from gdlearn.kernels import vec
 from gdlearn.shifts.halfvector import half_vector
 from gdlearn.kernels.jit import block, inlined
 
-from gdlearn.shifts.manifold_derivatives import constraint_jacobian
+from gdlearn.shifts.manifold_constraints import constraint_jacobian, constraints  # noqa: F401
 from gdlearn.shifts.specular_trace import relaxed_accept
 from gdlearn.shifts.manifold_shapes import (SH_EXT, SH_N, SH_P, SH_R, SH_TYPE, SH_U, SH_V, SH_WIDTH,  # noqa: F401
                                          SHAPE_PLANE, SHAPE_SPHERE, _v3, plane_row, shape_chart, shape_contains,
@@ -57,32 +57,6 @@ from gdlearn.shifts.manifold_shapes import (SH_EXT, SH_N, SH_P, SH_R, SH_TYPE, S
 MAX_ITER = 5
 MAX_HALVINGS = 10
 TOL = 1e-12
-
-
-@inlined
-def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
-    """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (wrong side,
-    degenerate half vector, vertex off its surface)."""
-    for j in range(k):
-        xj = _v3(X, j, 0)
-        if not shape_contains(shapes, j, xj):
-            return False
-        prev = x0 if j == 0 else _v3(X, j - 1, 0)
-        nxt = xe if j == k - 1 else _v3(X, j + 1, 0)
-        s, t, n = shape_frame(shapes, j, xj)
-        wi = vec.normalize(vec.sub(prev, xj))
-        wo = vec.normalize(vec.sub(nxt, xj))
-        wi_l = vec.to_local(wi, s, t, n)
-        wo_l = vec.to_local(wo, s, t, n)
-        side = wi_l[2] * wo_l[2]
-        if (refract[j] and not side < 0.0) or (not refract[j] and not side > 0.0):
-            return False
-        h, _, ok = half_vector(wi_l, wo_l, etas[j] if refract[j] else 1.0)
-        if not ok or not (vec.dot(wi_l, h) * wi_l[2] > 0.0 and vec.dot(wo_l, h) * wo_l[2] > 0.0):
-            return False
-        out[2 * j] = h[0] - targets[j, 0]
-        out[2 * j + 1] = h[1] - targets[j, 1]
-    return True
 
 
 @inlined

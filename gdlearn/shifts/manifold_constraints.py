@@ -1,13 +1,15 @@
-"""The derivatives of the manifold walk's half-vector constraints in closed form
-(:mod:`gdlearn.shifts.manifold`; Jakob & Marschner 2012): A = dC/dX for a walk's Newton step and
-B = dC/dx_e for the endpoint sensitivity of GPM Eq. 8 (Hua et al. 2017).
+"""The half-vector constraints of a specular chain and their derivatives in closed form
+(:mod:`gdlearn.shifts.manifold`'s walk; Jakob & Marschner 2012): C for the walk's residual, A =
+dC/dX for its Newton steps and B = dC/dx_e for the endpoint sensitivity of GPM Eq. 8 (Hua et al.
+2017). Both read a chain vertex's event the same way (:func:`vertex_event`), so a chain C calls
+invalid is one A and B refuse too.
 
 c_j = (h_j . s_j, h_j . t_j) - o_j depends on x_{j-1}, x_j and x_{j+1} only, so A is block
 tridiagonal. Every column is a few dot products: a unit vector w = v / |v| changes by
 dw = (I - w w^T) dv / |v|, the half vector h = sigma H / |H| of H = w_i + k w_o by
 dh = (sigma / |H|) (I - h h^T) dH, and a sphere vertex's own move also turns its frame
 (:func:`_frame_change`). Exact to round-off; tests/test_shifts_manifold.py checks them against
-fourth-order central differences of :func:`gdlearn.shifts.manifold.constraints`.
+fourth-order central differences of :func:`constraints`.
 """
 import math
 
@@ -17,6 +19,44 @@ from gdlearn.shifts.halfvector import half_vector
 from gdlearn.shifts.manifold_shapes import SH_R, SH_TYPE, SHAPE_PLANE, _v3, shape_contains, shape_frame
 
 _ZERO = (0.0, 0.0, 0.0)
+
+
+@inlined
+def vertex_event(x0, X, xe, shapes, etas, refract, j, k):
+    """Chain vertex j's specular event, between x_{j-1} (x0 for j = 0) and x_{j+1} (xe for the
+    last): (ok, its frame (s, t, n), w_i, w_o, l_i, l_o, the half vector in the local frame, k).
+    Not ok where the vertex is off its surface, a direction is degenerate, the two directions lie
+    on the wrong sides for its event (reflection or refraction), or the half vector is degenerate
+    or on the wrong side of either direction."""
+    no = (False, (_ZERO, _ZERO, _ZERO), _ZERO, _ZERO, 0.0, 0.0, _ZERO, 1.0)
+    xj = _v3(X, j, 0)
+    if not shape_contains(shapes, j, xj):
+        return no
+    prev = x0 if j == 0 else _v3(X, j - 1, 0)
+    nxt = xe if j == k - 1 else _v3(X, j + 1, 0)
+    s, t, n = shape_frame(shapes, j, xj)
+    vi, vo = vec.sub(prev, xj), vec.sub(nxt, xj)
+    wi, wo = vec.normalize(vi), vec.normalize(vo)
+    wi_l, wo_l = vec.to_local(wi, s, t, n), vec.to_local(wo, s, t, n)
+    side = wi_l[2] * wo_l[2]
+    if (refract[j] and not side < 0.0) or (not refract[j] and not side > 0.0):
+        return no
+    h, kk, ok = half_vector(wi_l, wo_l, etas[j] if refract[j] else 1.0)
+    if not ok or not (vec.dot(wi_l, h) * wi_l[2] > 0.0 and vec.dot(wo_l, h) * wo_l[2] > 0.0):
+        return no
+    return True, (s, t, n), wi, wo, vec.norm(vi), vec.norm(vo), h, kk
+
+
+@inlined
+def constraints(x0, X, xe, shapes, etas, refract, targets, k, out):
+    """Fill out[0:2k] with c_j (module docstring); False if an event is invalid (:func:`vertex_event`)."""
+    for j in range(k):
+        ok, _, _, _, _, _, h, _ = vertex_event(x0, X, xe, shapes, etas, refract, j, k)
+        if not ok:
+            return False
+        out[2 * j] = h[0] - targets[j, 0]
+        out[2 * j + 1] = h[1] - targets[j, 1]
+    return True
 
 
 @inlined
@@ -61,7 +101,7 @@ def _put_dc(M_, r, col, h, f, s, t, dH, ds, dt):
 def constraint_jacobian(x0, X, xe, ne, shapes, etas, refract, k, A, B, with_b):
     """A = dC/dX (2k x 2k: each chain vertex in its chart, the chart's axes being its frame's s, t)
     and, ``with_b``, B = dC/dx_e (2k x 2: x_e in the plane of normal ne, axes
-    ``vec.coordinate_system(ne)``), in closed form. False where :func:`constraints` would be invalid.
+    ``vec.coordinate_system(ne)``), in closed form. False where :func:`vertex_event` is not ok.
 
     c_j = (h_j . s_j, h_j . t_j) - o_j depends on x_{j-1}, x_j and x_{j+1} only (A is block
     tridiagonal, as in Jakob & Marschner 2012). With w_i = (x_{j-1} - x_j) / l_i,
@@ -77,24 +117,11 @@ def constraint_jacobian(x0, X, xe, ne, shapes, etas, refract, k, A, B, with_b):
             B[r, 0] = 0.0
             B[r, 1] = 0.0
     for j in range(k):
-        xj = _v3(X, j, 0)
-        if not shape_contains(shapes, j, xj):
+        ok, (s, t, n), wi, wo, li, lo, hl, kk = vertex_event(x0, X, xe, shapes, etas, refract, j, k)
+        if not (ok and li > 0.0 and lo > 0.0):
             return False
         prev = x0 if j == 0 else _v3(X, j - 1, 0)
         nxt = xe if j == k - 1 else _v3(X, j + 1, 0)
-        s, t, n = shape_frame(shapes, j, xj)
-        vi, vo = vec.sub(prev, xj), vec.sub(nxt, xj)
-        li, lo = vec.norm(vi), vec.norm(vo)
-        if not (li > 0.0 and lo > 0.0):
-            return False
-        wi, wo = vec.normalize(vi), vec.normalize(vo)
-        wi_l, wo_l = vec.to_local(wi, s, t, n), vec.to_local(wo, s, t, n)
-        side = wi_l[2] * wo_l[2]
-        if (refract[j] and not side < 0.0) or (not refract[j] and not side > 0.0):
-            return False
-        hl, kk, ok = half_vector(wi_l, wo_l, etas[j] if refract[j] else 1.0)
-        if not ok or not (vec.dot(wi_l, hl) * wi_l[2] > 0.0 and vec.dot(wo_l, hl) * wo_l[2] > 0.0):
-            return False
         h = vec.to_world(hl, s, t, n)
         H = (wi[0] + kk * wo[0], wi[1] + kk * wo[1], wi[2] + kk * wo[2])
         f = vec.dot(h, H) / vec.dot(H, H)                      # sigma / |H|
