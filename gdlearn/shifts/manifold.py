@@ -45,14 +45,12 @@ import math
 import numpy as np
 
 from gdlearn.kernels import vec
-from gdlearn.shifts.halfvector import half_vector
 from gdlearn.kernels.jit import block, inlined
 
 from gdlearn.shifts.manifold_constraints import constraint_jacobian, constraints  # noqa: F401
 from gdlearn.shifts.specular_trace import relaxed_accept
 from gdlearn.shifts.manifold_shapes import (SH_EXT, SH_N, SH_P, SH_R, SH_TYPE, SH_U, SH_V, SH_WIDTH,  # noqa: F401
-                                         SHAPE_PLANE, SHAPE_SPHERE, _v3, plane_row, shape_chart, shape_contains,
-                                         shape_frame, sphere_row)
+                                         SHAPE_PLANE, SHAPE_SPHERE, _v3, plane_row, shape_chart, sphere_row)
 
 MAX_ITER = 5
 MAX_HALVINGS = 10
@@ -151,6 +149,7 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
         if relax is not None:
             if _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xn):
                 return True, it, r
+        # A alone (with_b False): the endpoint's normal and B are not read, xe and A stand in for them
         if not constraint_jacobian(x0, X, xe, xe, shapes, etas, refract, k, A, A, False):
             return False, it, r
         for i in range(m):
