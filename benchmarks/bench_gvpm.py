@@ -29,13 +29,14 @@ bre-3d,gbre+l1,gbre-2d+l1`` (gbre: 3D kernel, mixed shift; gbre-2d: the ray-fram
 subsets on; bre-2d is there too; ``gvpm-relaxed+l1``, ``gbre-relaxed+l1`` and their l2 twins walk
 volume photons' chains relaxed, Gruson et al. 2018 Sec. 6.1; ``gvpm+cv``, ``gvpm+cv-weighted``,
 ``gbre+cv``, ``gbre+cv-weighted`` reconstruct by (weighted) control variates instead,
-:mod:`gdlearn.experiments.solvers`). Prints each method's final relMSE per seed, the ratio base /
-method (> 1: lower error than the base), its mean, min and max over the seeds, and the same with
-the reference's noise floor subtracted
-from both errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R).
-The methods' order rotates from seed to seed. ``--refs-only`` renders (and caches) the references
-and stops: keep each locked run under a few minutes by rendering the references, then each scene
-(or a part of its seeds, ``--first-seed``), in runs of their own.
+:mod:`gdlearn.experiments.solvers`; ``gbre-nosub+l1``, ``gbre-nosub+l2``, ``gbre-nosub+cv``,
+``gbre-nosub+cv-weighted`` gather every photon at every pixel, ``subsets=False``). Prints each
+method's final relMSE per seed, the ratio base / method (> 1: lower error than the base), its mean,
+min and max over the seeds, and the same with the reference's noise floor subtracted from both
+errors (E|I - R|^2 = E|I - L|^2 + E|R - L|^2 for an independent reference R). The methods' order
+rotates from seed to seed. ``--refs-only`` renders (and caches) the references and stops: keep each
+locked run under a few minutes by rendering the references, then each scene (or a part of its
+seeds, ``--first-seed``), in runs of their own.
 
     flock /tmp/gdlearn-bench.lock .venv/bin/python benchmarks/bench_gvpm.py --equal-time 20 --res 128 \
         --seeds 3 --scenes scenes/spot-medium.xml
@@ -251,6 +252,10 @@ def methods(a, extra=()) -> dict:
         m = every[name]
         every[f"{est}-relaxed+{sol}"] = Method(f"{est}-relaxed+{sol}", m.estimator, m.solver,
                                                m.options + (("walk", "relaxed"),))
+    for sol in ("l1", "l2", "cv", "cv-weighted"):   # every pixel gathers every photon (no photon subsets)
+        m = every[f"gbre+{sol}"]
+        every[f"gbre-nosub+{sol}"] = Method(f"gbre-nosub+{sol}", m.estimator, m.solver,
+                                            m.options + (("subsets", False),))
     for name in a.methods.split(","):
         base, _, scale = name.partition("@")       # "vpm@0.35": vpm from 0.35 x the default volume radius
         if base not in every:
