@@ -19,6 +19,7 @@ passes). benchmarks/README.md, "Photon subsets at equal time, and where G-BRE's 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import os
 import re
@@ -124,19 +125,33 @@ def main(argv=None) -> int:
     for tool in ("perf", "nm"):
         if shutil.which(tool) is None:
             raise SystemExit(f"perf_numba: {tool} not found; fix: install it (linux-perf / binutils)")
+    bad = [kv for kv in a.option if "=" not in kv]
+    if bad:
+        raise SystemExit(f"perf_numba: --option {bad[0]!r}; fix: KEY=VALUE, e.g. --option transport=media")
+    opts = {k: _value(v) for k, v in (kv.split("=", 1) for kv in a.option)}
     # before numba is imported: an empty cache, so every library is compiled here and keeps its object code
-    os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="perf_numba_")
+    cache = tempfile.mkdtemp(prefix="perf_numba_")
+    os.environ["NUMBA_CACHE_DIR"] = cache
+    try:
+        profile(a, opts, cache)
+    finally:                                # nothing of the run is kept: its compiled cache, perf.data, map
+        shutil.rmtree(cache, ignore_errors=True)
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(f"/tmp/perf-{os.getpid()}.map")
+    return 0
+
+
+def profile(a, opts: dict, cache: str) -> None:
+    """Compile and warm ``a.integrator``, map its libraries, record ``a.passes`` passes, print the shares."""
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
     from gdlearn.integrators import make
     from gdlearn.scene.load import load
-    opts = dict(kv.split("=", 1) for kv in a.option)
-    integ = make(a.integrator, load(a.scene, res=a.res), seed=0, threads=a.threads,
-                 **{k: _value(v) for k, v in opts.items()})
+    integ = make(a.integrator, load(a.scene, res=a.res), seed=0, threads=a.threads, **opts)
     t0 = time.perf_counter()
     integ.compile()
     integ.render_pass(0)
     print(f"compiled and warmed in {time.perf_counter() - t0:.0f} s; {write_perf_map(os.getpid())} symbols mapped")
-    data = os.path.join(os.environ["NUMBA_CACHE_DIR"], "perf.data")
+    data = os.path.join(cache, "perf.data")
     rec = subprocess.Popen(["perf", "record", "-F", "2999", "-p", str(os.getpid()), "-o", data],
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     time.sleep(1.0)                         # perf attaches
@@ -147,7 +162,6 @@ def main(argv=None) -> int:
     rec.send_signal(2)
     rec.wait()
     report(data, a.top)
-    return 0
 
 
 if __name__ == "__main__":
