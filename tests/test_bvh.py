@@ -176,3 +176,30 @@ def test_wide_node_slab_tests_match_the_scalar_test_and_come_sorted():
             t_exact = max(ts[list(block[6]).index(k & _CHILD)], 0.0)       # (a NaN slab can leave it < 0)
             assert t <= t_exact and (t_exact == 0.0 or t >= t_exact * (1 - 2.0 ** -27))
     assert counts[0] > 100 and counts[2:].sum() > 300 and counts[5:].sum() > 10   # all cases were met
+
+
+@pytest.mark.parametrize("keep", [True, False])
+def test_every_lane_of_a_leaf_is_tested_whatever_its_size(keep):
+    """_leaf_lanes on leaves of 1 to 20 lanes: 8-lane blocks, and a last block of at most 4 lanes
+    tested 4 wide (simd.block4). Lane k is a triangle at x in [k, k + 0.5], z = -k / 10: a ray
+    straight down onto it finds lane k at t = 1 + k / 10 (kept in the scratch); a ray past the
+    last lane finds none. A lane left out of its block (a 4-wide test of 5 lanes) fails."""
+    from gdlearn.kernels.accel.bvh import _SCRATCH, _leaf_lanes
+    from gdlearn.kernels.accel.bvh_build import LANES, ROW_LIM, SOA_ROWS
+    scratch = np.zeros(3 * _SCRATCH)
+    for lanes in range(1, 21):
+        n8 = -(-lanes // LANES) * LANES
+        block = np.zeros((SOA_ROWS, n8))
+        for k in range(lanes):
+            block[0:3, k] = (k, 0.0, -k / 10)
+            block[3:6, k] = (0.5, 0.0, 0.0)
+            block[6:9, k] = (0.0, 0.5, 0.0)
+            block[ROW_LIM, k] = 1.0
+        nodes = np.concatenate([np.full(5, np.nan), block.reshape(-1)])     # the leaf's block at base 5
+        for k in range(lanes):
+            got = _leaf_lanes(nodes, 5, lanes, (k + 0.1, 0.1, 1.0), (0.0, 0.0, -1.0), 0.0, math.inf, scratch, keep)
+            assert got == k, (lanes, k)
+            if keep:
+                assert scratch[k] == 1.0 + k / 10
+        assert _leaf_lanes(nodes, 5, lanes, (lanes + 0.7, 0.1, 1.0), (0.0, 0.0, -1.0), 0.0, math.inf,
+                           scratch, keep) == -1

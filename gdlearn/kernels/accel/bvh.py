@@ -39,7 +39,7 @@ from numba.extending import intrinsic
 
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE, CHILD_MASK, STACK_KEYS, build, build_scene  # noqa: F401
 from gdlearn.kernels.geometry import INFO_MAT, INFO_TYPE, intersect_prim
-from gdlearn.kernels.accel.simd import block8, children8, sort8
+from gdlearn.kernels.accel.simd import block4, block8, children8, sort8
 from gdlearn.kernels.layout import MAT_TYPE, NULL
 from gdlearn.kernels.jit import inlined, leaf, noalloc
 
@@ -177,7 +177,8 @@ def _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, keep):
     """The lane (0 .. lanes-1) of a leaf's block with the nearest hit in (tmin, tmax), or -1.
 
     A lane is hit when a, b >= 0, a, b <= 1 and a + b <= lim (1: triangle, 2: parallelogram),
-    tested 8 lanes at a time (:func:`gdlearn.kernels.accel.simd.block8`, :func:`_lane_tuv`'s arithmetic).
+    tested 8 lanes at a time (:func:`gdlearn.kernels.accel.simd.block8`, :func:`_lane_tuv`'s arithmetic;
+    a last block of at most 4 lanes by :func:`~gdlearn.kernels.accel.simd.block4`).
     The nearest hit is an integer minimum of the distance's IEEE bits (monotone for t > 0) with the
     lane in the low 8 bits; two hits closer than 2^-44 relative may be resolved by lane order, both
     are on the ray to within rounding. With ``keep`` every lane's t, a, b go to ``scratch``
@@ -189,7 +190,10 @@ def _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, keep):
     best = _NO_HIT
     for blk in range(nb):
         k0 = np.int64(blk << 3)
-        key = block8(nodes, b0 + k0, s, o, d, tmin, tmax, k0, scratch, keep)
+        if lanes - k0 <= 4:                    # a last block of 1-4 lanes: half the vector
+            key = block4(nodes, b0 + k0, s, o, d, tmin, tmax, k0, scratch, keep)
+        else:
+            key = block8(nodes, b0 + k0, s, o, d, tmin, tmax, k0, scratch, keep)
         best = key if key < best else best
     if best == _NO_HIT:
         return -1
