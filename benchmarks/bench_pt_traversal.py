@@ -100,7 +100,7 @@ def _packets(sa, rays, out, any_hit):
                 S[(RO + c) * PT.PK + j] = rays[r0 + min(j, m - 1), c]
             if j >= m:
                 S[(RO + 6) * PT.PK + j] = -1.0
-        PT.packet_trace(sa.nodes, sa.node_info, S, Q, RO, stack, any_hit)
+        PT.packet_trace(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, RO, stack, any_hit)
         for j in range(m):
             out[r0 + j] = Q[(PT.Q_HIT if any_hit else PT.Q_PRIM) * PT.PK + j]
 
@@ -151,12 +151,12 @@ def main(argv=None):
             out = np.zeros(max(nc, ns), dtype=np.int64)
             row = [best_ns(_run_scalar, (sa, closest, out, False), nc, a.repeat),
                    best_ns(_run_scalar, (sa, shadows, out, True), ns, a.repeat)]
-            if PT.lanes_only(sa.node_info) and sa.node_info[0, 1] > 0:      # packets: one leaf of lanes
+            if sa.node_info[0, 1] > 0:      # packets: one leaf
                 row += [best_ns(_run_packets, (sa, closest, out, False), nc, a.repeat),
                         best_ns(_run_packets, (sa, shadows, out, True), ns, a.repeat)]
             cells = " ".join(f"{x:10.1f}" for x in row[:2]) + "".join(f"{x:15.1f}" for x in row[2:])
             print(f"{name:13s} {c_node:6.0f} {leaves:6d} {cells}")
-    print("# ns per ray, best thread CPU time; packets: 64 rays at once, only where the tree is one leaf of lanes")
+    print("# ns per ray, best thread CPU time; packets: 64 rays at once, only where the tree is one leaf")
 
 
 if __name__ == "__main__":

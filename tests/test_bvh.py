@@ -178,6 +178,42 @@ def test_wide_node_slab_tests_match_the_scalar_test_and_come_sorted():
     assert counts[0] > 100 and counts[2:].sum() > 300 and counts[5:].sum() > 10   # all cases were met
 
 
+def test_packet_traversal_matches_the_scalar_one():
+    """accel.packet.packet_trace over a tree whose leaves hold lanes, spheres and disks: each ray's
+    closest primitive and its t, u, v (bits) are the scalar traversal's, its any-hit flag too; idle
+    rays (tmax < 0) hit nothing. Leaves are visited in another order than one ray would, which can
+    only matter at an exact tie (none in a random soup)."""
+    from gdlearn.kernels.accel import packet as PT
+    rng = np.random.default_rng(12)
+    rows, types = _soup(90, rng)
+    rows, types, info, nodes, node_info = _scene(rows, types, np.arange(len(rows)))
+    assert node_info[0, 1] == 0 and (node_info[:, 1] > node_info[:, 2]).any()   # a tree; leaves with spheres/disks
+    stack = np.empty(STACK_SIZE, np.int32)
+    mats = np.zeros((1, MAT_WIDTH))
+    ro, pk = PT.N_S_TRACE, PT.PK
+    hits = 0
+    for _ in range(32):
+        S = np.zeros((ro + 7) * pk)
+        Q = np.zeros(PT.N_Q_TRACE * pk, dtype=np.int64)
+        rays = [(*_ray(rng, -7, 7), rng.choice([math.inf, 3.0, -1.0])) for _ in range(pk)]
+        for j, (o, d, tmax) in enumerate(rays):
+            S[(ro + np.arange(7)) * pk + j] = (*o, *d, tmax)
+        S_any, Q_any = S.copy(), Q.copy()
+        PT.packet_trace(nodes, node_info, rows, info, S, Q, ro, stack, False)
+        PT.packet_trace(nodes, node_info, rows, info, S_any, Q_any, ro, stack, True)
+        for j, (o, d, tmax) in enumerate(rays):
+            t, p, u, v = closest_hit(nodes, node_info, rows, info, o, d, 0.0, tmax, stack)
+            if tmax < 0.0:
+                p = -1
+            assert Q[PT.Q_PRIM * pk + j] == p
+            if p >= 0:
+                assert (S[(ro + 6) * pk + j], S[PT.S_U * pk + j], S[PT.S_V * pk + j]) == (t, u, v)
+                hits += types[p] != g.P_TRIANGLE
+            blocked = tmax > 0.0 and any_hit(nodes, node_info, rows, info, o, d, 0.0, tmax, stack, False, mats) >= 0
+            assert Q_any[PT.Q_HIT * pk + j] == blocked
+    assert hits > 20        # spheres and disks were hit, not only lanes
+
+
 @pytest.mark.parametrize("keep", [True, False])
 def test_every_lane_of_a_leaf_is_tested_whatever_its_size(keep):
     """_leaf_lanes on leaves of 1 to 20 lanes: 8-lane blocks, and a last block of at most 4 lanes

@@ -75,9 +75,10 @@ def test_effect_subsets_that_keep_every_diffuse_path(effects):
 
 @pytest.mark.parametrize("name", ["glossy-box", "caustics-box", "mirror-caustic", "caustic-closeup", "spot-medium"])
 def test_glossy_specular_spheres_and_spot_lights(name):
-    """Rough plastic and metal (the glossy box), glass and mirror spheres (traced ray by ray: no
-    packet test for spheres), a spot light (spot-medium without its medium's null-BSDF cube, rendered
-    by ``path``): any BSDF but null, any emitter but an environment, as long as every effect is kept."""
+    """Rough plastic and metal (the glossy box), glass and mirror spheres (after a leaf's lanes, one
+    sphere at a time against the packet), a spot light (spot-medium without its medium's null-BSDF
+    cube, rendered by ``path``): any BSDF but null, any emitter but an environment, as long as every
+    effect is kept."""
     scene = load(ROOT / "scenes" / f"{name}.xml", res=16, max_depth=8)
     scene.integrator.type = "path"
     scene.shapes = [sh for sh in scene.shapes if sh.bsdf is None or sh.bsdf.type != "null"]

@@ -19,9 +19,9 @@ kernel's bit for bit (tests/test_pt_packet.py), threads and passes included.
 effects mask that keeps every effect the scene can show at the depth rendered (the packet tracer
 tracks no path classes: with nothing to drop, every contribution counts). Everything else renders
 with :mod:`gdlearn.integrators.path.surface`. Rays are traced as a packet when the scene is one leaf
-of triangles and parallelograms (the Cornell box, the glossy box), else ray by ray with the
-scalar traversal (spheres, trees: incoherent rays through a tree share too few nodes for a packet
-to pay), and still gain from the lanes' overlap.
+(the Cornell box, the glossy box, the glass and mirror spheres of the caustic scenes), else ray by
+ray with the scalar traversal (trees: incoherent rays through a tree share too few nodes for a
+packet to pay), and still gain from the lanes' overlap.
 """
 import math
 
@@ -289,11 +289,10 @@ def _shade_next(sa, S, Q, j, rr_depth):
 
 @leaf
 def _trace(sa, S, Q, ro, stack, any_hit):
-    """The lanes' rays at row ro: as a packet when the tree is one leaf of lanes; else ray by ray
-    with the scalar traversal (incoherent rays through a tree share too few nodes for a packet to
-    pay; spheres and disks have no packet test)."""
-    if sa.node_info[0, 1] > 0 and sa.node_info[0, 1] == sa.node_info[0, 2]:
-        packet_trace(sa.nodes, sa.node_info, S, Q, ro, stack, any_hit)
+    """The lanes' rays at row ro: as a packet when the tree is one leaf; else ray by ray with the
+    scalar traversal (incoherent rays through a tree share too few nodes for a packet to pay)."""
+    if sa.node_info[0, 1] > 0:
+        packet_trace(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, ro, stack, any_hit)
         return
     for j in range(PK):
         o, d, tmax = _get3(S, ro, j), _get3(S, ro + 3, j), S[(ro + 6) * PK + j]

@@ -16,8 +16,9 @@ The packet lives in the rows of two flat arrays of the caller, ``S`` float64 and
 row of ``PK`` entries per quantity: element ``S[r * PK + j]`` is row r of ray j. A constant row
 stride lets the compiler prove that rows do not overlap (with a run-time stride it gave up
 vectorising). A ray set is 7 consecutive rows from ``ro``: origin, direction, tmax; a ray with
-tmax < 0 is idle and hits nothing. Only leaves of lanes (triangles, parallelograms) are supported:
-the caller checks :func:`lanes_only` once per scene.
+tmax < 0 is idle and hits nothing. A leaf's spheres and disks (after its lanes) are tested one
+primitive at a time against all the rays (:func:`_prim_test`), as the scalar code tests them after
+the lanes.
 """
 import math
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits, _fmax, _fmin
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
+from gdlearn.kernels.geometry import INFO_TYPE, intersect_prim
 from gdlearn.kernels.jit import leaf
 
 #: rays per packet (64 float64 per row: 8 AVX-512 vectors)
@@ -38,12 +40,6 @@ N_S_TRACE = 8
 # int rows: the hit primitive (-1: none), a leaf's best key, the any-hit flag
 Q_PRIM, Q_LKEY, Q_HIT = range(3)
 N_Q_TRACE = 3
-
-
-def lanes_only(node_info) -> bool:
-    """True when every primitive is in a lane (no sphere or disk): packets can trace the scene."""
-    leaves = node_info[node_info[:, 1] > 0]
-    return bool(np.all(leaves[:, 2] == leaves[:, 1]))
 
 
 @leaf
@@ -103,17 +99,40 @@ def _adopt(nodes, first, base, lanes, n8, S, Q, ro):
 
 
 @leaf
-def _leaf(nodes, node_info, node, S, Q, ro, any_hit):
-    """Leaf ``node`` against the packet."""
+def _prim_test(prims, ptype, i, S, Q, ro, any_hit):
+    """Primitive ``i`` (a sphere or a disk, of type ``ptype``) against the packet: the scalar
+    ``geometry.intersect_prim`` per ray, nearer than the ray's tmax (its hit so far)."""
+    for j in range(PK):
+        tmax = S[(ro + 6) * PK + j]
+        o = (S[ro * PK + j], S[(ro + 1) * PK + j], S[(ro + 2) * PK + j])
+        d = (S[(ro + 3) * PK + j], S[(ro + 4) * PK + j], S[(ro + 5) * PK + j])
+        t, u, v = intersect_prim(prims, ptype, i, o, d, 0.0, tmax)
+        if any_hit:
+            Q[Q_HIT * PK + j] |= np.int64(t < tmax)
+        elif t < tmax:
+            Q[Q_PRIM * PK + j] = i
+            S[(ro + 6) * PK + j] = t
+            S[S_U * PK + j] = u
+            S[S_V * PK + j] = v
+
+
+@leaf
+def _leaf(nodes, node_info, prims, prim_info, node, S, Q, ro, any_hit):
+    """Leaf ``node`` against the packet: its lanes, then its other primitives in order (the scalar
+    ``bvh._leaf_closest``'s order, so a tie goes the same way)."""
     first, base, lanes = node_info[node, 0], np.int64(node_info[node, 3]), node_info[node, 4]
-    n8 = np.int64(((lanes + LANES - 1) >> 3) << 3)
-    if not any_hit:
-        for j in range(PK):
-            Q[Q_LKEY * PK + j] = _NO_HIT
-    for k in range(lanes):
-        _lane_test(nodes, base + k, n8, S, Q, ro, k, any_hit)
-    if not any_hit:
-        _adopt(nodes, first, base, lanes, n8, S, Q, ro)
+    ntri = node_info[node, 2]
+    if ntri > 0:
+        n8 = np.int64(((lanes + LANES - 1) >> 3) << 3)
+        if not any_hit:
+            for j in range(PK):
+                Q[Q_LKEY * PK + j] = _NO_HIT
+        for k in range(lanes):
+            _lane_test(nodes, base + k, n8, S, Q, ro, k, any_hit)
+        if not any_hit:
+            _adopt(nodes, first, base, lanes, n8, S, Q, ro)
+    for i in range(first + ntri, first + node_info[node, 1]):
+        _prim_test(prims, prim_info[i, INFO_TYPE], i, S, Q, ro, any_hit)
 
 
 @leaf
@@ -138,7 +157,7 @@ def _box_any(nodes, b, S, Q, ro, any_hit):
 
 
 @leaf
-def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
+def packet_trace(nodes, node_info, prims, prim_info, S, Q, ro, stack, any_hit):
     """Trace the packet's ray set at row ``ro`` (t in (0, tmax)). Closest hit: Q_PRIM (-1 on a miss)
     and the hit's t (in the tmax row), S_U, S_V; ``any_hit``: Q_HIT is 1 for a blocked ray.
     ``stack`` is the scalar traversal's (its first ``bvh.DEPTH`` entries, as int32 nodes)."""
@@ -148,7 +167,7 @@ def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
         else:
             Q[Q_PRIM * PK + j] = -1
     if node_info[0, 1] > 0:                       # one leaf: no boxes
-        _leaf(nodes, node_info, 0, S, Q, ro, any_hit)
+        _leaf(nodes, node_info, prims, prim_info, 0, S, Q, ro, any_hit)
         return
     for r in range(3):                            # the slab tests' reciprocal directions
         for j in range(PK):
@@ -158,7 +177,7 @@ def packet_trace(nodes, node_info, S, Q, ro, stack, any_hit):
     node = 0
     while True:
         if node_info[node, 1] > 0:
-            _leaf(nodes, node_info, node, S, Q, ro, any_hit)
+            _leaf(nodes, node_info, prims, prim_info, node, S, Q, ro, any_hit)
         else:                                     # the children any ray enters; the first is next
             off = np.int64(node_info[node, 0])
             nxt = -1
