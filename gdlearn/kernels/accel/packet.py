@@ -27,7 +27,7 @@ import numpy as np
 
 from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits, _fmax, _fmin
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
-from gdlearn.kernels.geometry import INFO_TYPE, intersect_prim
+from gdlearn.kernels.geometry import INFO_TYPE, P_SPHERE, intersect_disk, intersect_sphere
 from gdlearn.kernels.jit import leaf
 
 #: rays per packet (64 float64 per row: 8 AVX-512 vectors)
@@ -101,12 +101,15 @@ def _adopt(nodes, first, base, lanes, n8, S, Q, ro):
 @leaf
 def _prim_test(prims, ptype, i, S, Q, ro, any_hit):
     """Primitive ``i`` (a sphere or a disk, of type ``ptype``) against the packet: the scalar
-    ``geometry.intersect_prim`` per ray, nearer than the ray's tmax (its hit so far)."""
+    ``geometry.intersect_prim``'s test per ray, nearer than the ray's tmax (its hit so far)."""
     for j in range(PK):
         tmax = S[(ro + 6) * PK + j]
         o = (S[ro * PK + j], S[(ro + 1) * PK + j], S[(ro + 2) * PK + j])
         d = (S[(ro + 3) * PK + j], S[(ro + 4) * PK + j], S[(ro + 5) * PK + j])
-        t, u, v = intersect_prim(prims, ptype, i, o, d, 0.0, tmax)
+        if ptype == P_SPHERE:       # a leaf's triangles are all in its lanes
+            t, u, v = intersect_sphere(prims, i, o, d, 0.0, tmax), 0.0, 0.0
+        else:
+            t, u, v = intersect_disk(prims, i, o, d, tmax)
         if any_hit:
             Q[Q_HIT * PK + j] |= np.int64(t < tmax)
         elif t < tmax:
