@@ -33,6 +33,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from collections import defaultdict
 
 
@@ -205,6 +206,9 @@ def main(argv=None) -> int:
 def profile(a, opts: dict, cache: str) -> None:
     """Compile and warm ``a.integrator``, map its libraries, record ``a.passes`` passes, print the shares."""
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+    from numba.core.errors import NumbaDebugInfoWarning
+    # numba's own lambdas (array reprs) have no source file: their lines are not ours to rank
+    warnings.filterwarnings("ignore", category=NumbaDebugInfoWarning)
     from gdlearn.integrators import make
     from gdlearn.scene.load import load
     integ = make(a.integrator, load(a.scene, res=a.res), seed=0, threads=a.threads, **opts)
