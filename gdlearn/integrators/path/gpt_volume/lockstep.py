@@ -36,14 +36,16 @@ from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin
 from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_LOBE_CLASS, BROKEN_UNPAIRED, F_BETA, F_LR, F_NG,
                                                          F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI, I_ALIVE, I_ESCAPED,
-                                                         I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, FREE,
+                                                         I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE, FREE, MERGED,
                                                          emitted, get3, mul3, sc3, set3, shift_direction, vclass_of)
 from gdlearn.shifts.policy import conn, decide
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_FAIL, EV_SCATTER, EV_SURFACE, base_flight, offset_flight
 from gdlearn.integrators.path.gpt_volume.vertex import (ALIVE, F_D, F_O, F_TMAX, FAILED, I_KIND,
-                                               I_MED, K_ESCAPED, K_MEDIUM, K_SURFACE, NFV, NIV, follow, nee_pairs,
+                                               I_MED, K_ESCAPED, K_MEDIUM, K_SURFACE, NFV, NIV, follow, follow_merged,
+                                               nee_pairs,
                                                pair, push_medium_vertex, reconnect_offset, replay_phase,
-                                               scale_log, set_ray, set_vertex, start_offsets, wanted)
+                                               scale_log, set_ray, set_vertex, start_offsets, wanted,
+                                               TR_UNKNOWN)
 from gdlearn.kernels.layout import V_MEDIUM
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
 from gdlearn.kernels.media.medium import medium_params
@@ -149,7 +151,10 @@ def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, s
         if oi[k, I_ALIVE] != ALIVE:
             continue
         if oi[k, I_RECONN] != FREE:
-            follow(sa, of, oi, k, bv, cfg)
+            if oi[k, I_RECONN] == MERGED:
+                follow_merged(of, oi, k, bv)
+            else:
+                follow(sa, of, oi, k, bv, cfg)
             if oi[k, I_ALIVE] == ALIVE:   # the same flight as the base: its weight
                 set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
                 set_vertex(sa, of, oi, k, kind, nx.prim, nx.p, nx.ng, nx.ns, nx.d, nx.med)
@@ -211,6 +216,7 @@ def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, 
     em = min(int(u_sel * n_em), n_em - 1)        # even if black for the base: an offset may see it
     nb = ZERO3
     cbv = ZERO3
+    tr, m = TR_UNKNOWN, -1
     if em_b >= 0:
         m = medium if medium_vertex else next_medium(sa.prim_info, prim, medium, dl, ng)
         tr = shadow_transmittance(sa, p, ng, q, m, stack)
@@ -231,7 +237,7 @@ def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, 
                 cbv = (beta[0] * f[0] * wl[0] * kk, beta[1] * f[1] * wl[1] * kk, beta[2] * f[2] * wl[2] * kk)
     st = state if medium_vertex else pc_push(state, vertex_class(mat, cfg.threshold))
     cb = cbv if wanted(cfg, st) else ZERO3
-    nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, cfg, medium_vertex, stack)
+    nee_pairs(sa, em, q, nq, p, nb, tr, m, cb, of, oi, diff, summ, cfg, medium_vertex, stack)
     return cb
 
 

@@ -103,7 +103,7 @@ def start_offsets(sa, px, of, oi):
         oi[k, I_ALIVE] = ALIVE
 
 
-@noalloc
+@leaf
 def set_vertex(sa, of, oi, k, kind, prim, p, ng, ns, d, medium):
     """Make the event of a flight along d offset k's current vertex."""
     set3(of, k, F_POS, p)
@@ -156,11 +156,17 @@ def pair(diff, summ, of, oi, k, co, cb, cfg):
             diff[k, c] -= cb[c]
 
 
+#: no transmittance known for :func:`nee_offset` (it traces the shadow segment itself)
+TR_UNKNOWN = (-1.0, -1.0, -1.0)
+
+
 @noalloc
-def nee_offset(sa, em, q, nq, of, oi, k, stack):
+def nee_offset(sa, em, q, nq, of, oi, k, stack, tr_known, m_known):
     """Next event of offset k's vertex towards the fixed light point q (area Jacobian 1): Le / pdf,
     the BSDF (surface) or phase function (medium), the transmittance of the offset's *own* shadow
-    segment (null interfaces crossed) and the power heuristic against BSDF / phase sampling."""
+    segment (null interfaces crossed) and the power heuristic against BSDF / phase sampling.
+    ``tr_known``: the transmittance of this very segment in medium ``m_known`` when the base traced
+    it (an offset JOINED at the base's vertex, :func:`nee_pairs`), else :data:`TR_UNKNOWN`."""
     p = get3(of, k, F_POS)
     w_em, pdf_em, delta, dl = light_weight(sa, em, q, nq, p)
     if not (w_em[0] + w_em[1] + w_em[2] > 0.0):
@@ -169,7 +175,10 @@ def nee_offset(sa, em, q, nq, of, oi, k, stack):
     f, pdf_dir, medium = scatter_eval(sa, of, oi, k, dl, ng)
     if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
         return ZERO3
-    tr = shadow_transmittance(sa, p, ng, q, medium, stack)
+    if medium == m_known and tr_known[0] >= 0.0:
+        tr = tr_known
+    else:
+        tr = shadow_transmittance(sa, p, ng, q, medium, stack)
     if tr[0] == 0.0 and tr[1] == 0.0 and tr[2] == 0.0:
         return ZERO3
     mw = 1.0 if delta else power_heuristic(pdf_em, pdf_dir)
@@ -177,9 +186,12 @@ def nee_offset(sa, em, q, nq, of, oi, k, stack):
 
 
 @noalloc
-def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, cfg, medium_vertex, stack):
+def nee_pairs(sa, em, q, nq, p, nb, tr_b, m_b, cb, of, oi, diff, summ, cfg, medium_vertex, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every live offset
-    by reconnecting to the same light point (directional / constant: the same direction)."""
+    by reconnecting to the same light point (directional / constant: the same direction). An offset
+    JOINED at the base's vertex p has the base's shadow segment: its transmittance ``tr_b`` (in
+    medium ``m_b``; :data:`TR_UNKNOWN` if the base traced none) is reused, as the surface kernel
+    reuses the base's visibility."""
     et = int(sa.emitters[em, EM_TYPE])
     fixed_point = et == E_AREA or et == E_POINT or et == E_SPOT
     for k in range(4):
@@ -200,7 +212,8 @@ def nee_pairs(sa, em, q, nq, p, nb, cb, of, oi, diff, summ, cfg, medium_vertex, 
                 else:
                     po = get3(of, k, F_POS)
                     qo = q if fixed_point else same_direction_point(sa.emitters, em, p, q, po)
-                    no = nee_offset(sa, em, qo, nq, of, oi, k, stack)
+                    same = oi[k, I_RECONN] == JOINED and fixed_point and po == p
+                    no = nee_offset(sa, em, qo, nq, of, oi, k, stack, tr_b if same else TR_UNKNOWN, m_b)
                 co = mul3(get3(of, k, F_BETA), no)
         pair(diff, summ, of, oi, k, co, cb, cfg)
 
@@ -263,8 +276,7 @@ def follow(sa, of, oi, k, bv, cfg):
     density differ once more (a delta lobe cannot be followed); a MERGED one is the base path itself
     from here on (f' / p = the base's weight)."""
     vb_medium = bv.kind == VB_MEDIUM
-    mat_b, wo_b_local, wo_b, weight_b, pdf_b, delta_b, cls_b, x_b = (bv.mat, bv.wo, bv.wo_w, bv.weight, bv.pdf,
-                                                                     bv.delta, bv.cls_b, bv.x)
+    mat_b, wo_b_local, wo_b, pdf_b, delta_b, x_b = bv.mat, bv.wo, bv.wo_w, bv.pdf, bv.delta, bv.x
     if oi[k, I_RECONN] == JOINED:
         wi_w = get3(of, k, F_WI)
         if vb_medium:
@@ -286,13 +298,22 @@ def follow(sa, of, oi, k, bv, cfg):
             oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat_b, False, cfg.threshold))
         oi[k, I_PREV_DELTA] = 0
         oi[k, I_RECONN] = MERGED
+        set3(of, k, F_PREV_P, x_b)
     else:
-        set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), weight_b))
-        of[k, F_PREV_PDF] = pdf_b
-        oi[k, I_PREV_DELTA] = 1 if delta_b else 0
-        if not vb_medium:
-            oi[k, I_STATE] = pc_push(oi[k, I_STATE], cls_b)
-    set3(of, k, F_PREV_P, x_b)
+        follow_merged(of, oi, k, bv)
+
+
+@leaf
+def follow_merged(of, oi, k, bv):
+    """:func:`follow` for a MERGED offset, the common case once offsets have reconnected: f' / p =
+    the base's weight, no evaluation. Inlined into the caller's offset loop (a call would pass the
+    whole base vertex as arguments, once per offset and segment)."""
+    set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), bv.weight))
+    of[k, F_PREV_PDF] = bv.pdf
+    oi[k, I_PREV_DELTA] = 1 if bv.delta else 0
+    if bv.kind != VB_MEDIUM:
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], bv.cls_b)
+    set3(of, k, F_PREV_P, bv.x)
 
 
 @noalloc
