@@ -42,14 +42,17 @@ import os
 import sys
 import time
 
-import numpy as np
+# this tree's gdlearn, also when run from a worktree (else the editable install's)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from gdlearn.experiments import SceneFile, equal_time
-from gdlearn.experiments.gradients import gradient_errors, shift_summary, summarize
-from gdlearn.experiments.references import render_reference
-from gdlearn.experiments.study import Method
-from gdlearn.integrators import make
-from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, SUPPORTED
+import numpy as np  # noqa: E402
+
+from gdlearn.experiments import SceneFile, equal_time  # noqa: E402
+from gdlearn.experiments.gradients import gradient_errors, shift_summary, summarize  # noqa: E402
+from gdlearn.experiments.references import render_reference  # noqa: E402
+from gdlearn.experiments.study import Method  # noqa: E402
+from gdlearn.integrators import make  # noqa: E402
+from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, SUPPORTED  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ACTIONS = ("replay", "halfvector", "reconnection", "manifold", "fail")

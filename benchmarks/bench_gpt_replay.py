@@ -18,13 +18,17 @@ Nothing is asserted: numbers depend on the machine and its load (printed in the 
 """
 import argparse
 import os
+import sys
 import time
 
-import numpy as np
+# this tree's gdlearn, also when run from a worktree (else the editable install's)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from gdlearn.experiments import SceneFile, equal_time
-from gdlearn.experiments.references import render_reference
-from gdlearn.integrators import make
+import numpy as np  # noqa: E402
+
+from gdlearn.experiments import SceneFile, equal_time  # noqa: E402
+from gdlearn.experiments.references import render_reference  # noqa: E402
+from gdlearn.integrators import make  # noqa: E402
 
 SOLVERS = ("cv", "cv-weighted", "l2", "l1")
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
