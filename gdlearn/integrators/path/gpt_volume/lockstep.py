@@ -41,11 +41,10 @@ from gdlearn.integrators.path.gpt_surface.vertex import (BROKEN_LOBE_CLASS, BROK
 from gdlearn.shifts.policy import conn, decide
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_FAIL, EV_SCATTER, EV_SURFACE, base_flight, offset_flight
 from gdlearn.integrators.path.gpt_volume.vertex import (ALIVE, F_D, F_O, F_TMAX, FAILED, I_KIND,
-                                               I_MED, K_ESCAPED, K_MEDIUM, K_SURFACE, NFV, NIV, follow, follow_merged,
-                                               nee_pairs,
-                                               pair, push_medium_vertex, reconnect_offset, replay_phase,
-                                               scale_log, set_ray, set_vertex, start_offsets, wanted,
-                                               TR_UNKNOWN)
+                                               I_MED, K_ESCAPED, K_MEDIUM, K_SURFACE, NFV, NIV, TR_UNKNOWN,
+                                               follow_joined, follow_merged, nee_pairs, pair, push_medium_vertex,
+                                               reconnect_offset, replay_phase, scale_log, set_ray, set_vertex,
+                                               start_offsets, wanted)
 from gdlearn.kernels.layout import V_MEDIUM
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
 from gdlearn.kernels.media.medium import medium_params
@@ -154,7 +153,7 @@ def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, s
             if oi[k, I_RECONN] == MERGED:
                 follow_merged(of, oi, k, bv)
             else:
-                follow(sa, of, oi, k, bv, cfg)
+                follow_joined(sa, of, oi, k, bv, cfg)
             if oi[k, I_ALIVE] == ALIVE:   # the same flight as the base: its weight
                 set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
                 set_vertex(sa, of, oi, k, kind, nx.prim, nx.p, nx.ng, nx.ns, nx.d, nx.med)

@@ -270,43 +270,39 @@ def reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack):
 
 
 @noalloc
-def follow(sa, of, oi, k, bv, cfg):
-    """Offset k shares the base vertex x_b (``bv``, :class:`~gdlearn.integrators.path.params.BaseVertex`):
-    the same outgoing direction (J = 1). A JOINED offset arrives from its own direction, so f and the
-    density differ once more (a delta lobe cannot be followed); a MERGED one is the base path itself
-    from here on (f' / p = the base's weight)."""
-    vb_medium = bv.kind == VB_MEDIUM
-    mat_b, wo_b_local, wo_b, pdf_b, delta_b, x_b = bv.mat, bv.wo, bv.wo_w, bv.pdf, bv.delta, bv.x
-    if oi[k, I_RECONN] == JOINED:
-        wi_w = get3(of, k, F_WI)
-        if vb_medium:
-            _, _, g = medium_params(sa.media[oi[k, I_MED]])
-            f1 = hg_eval(g, dot(wi_w, wo_b))
-            update(of, k, (f1, f1, f1), 1.0, f1, pdf_b)
-            of[k, F_PREV_PDF] = f1
-        else:
-            if delta_b:
-                oi[k, I_ALIVE] = FAILED
-                return
-            ns = get3(of, k, F_NS)
-            s, t = coordinate_system(ns)
-            wi = to_local(wi_w, s, t, ns)
-            f = bsdf_eval(mat_b, wi, wo_b_local)
-            pdf_o = bsdf_pdf(mat_b, wi, wo_b_local)
-            update(of, k, f, 1.0, pdf_o, pdf_b)
-            of[k, F_PREV_PDF] = pdf_o
-            oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(mat_b, False, cfg.threshold))
-        oi[k, I_PREV_DELTA] = 0
-        oi[k, I_RECONN] = MERGED
-        set3(of, k, F_PREV_P, x_b)
+def follow_joined(sa, of, oi, k, bv, cfg):
+    """A JOINED offset k shares the base vertex x_b (``bv``,
+    :class:`~gdlearn.integrators.path.params.BaseVertex`) and takes the same outgoing direction
+    (J = 1), but it arrives from its own direction, so f and the density differ once more (a delta
+    lobe cannot be followed). From here on it is MERGED (:func:`follow_merged`)."""
+    wo_b_local, pdf_b = bv.wo, bv.pdf
+    wi_w = get3(of, k, F_WI)
+    if bv.kind == VB_MEDIUM:
+        _, _, g = medium_params(sa.media[oi[k, I_MED]])
+        f1 = hg_eval(g, dot(wi_w, bv.wo_w))
+        update(of, k, (f1, f1, f1), 1.0, f1, pdf_b)
+        of[k, F_PREV_PDF] = f1
     else:
-        follow_merged(of, oi, k, bv)
+        if bv.delta:
+            oi[k, I_ALIVE] = FAILED
+            return
+        ns = get3(of, k, F_NS)
+        s, t = coordinate_system(ns)
+        wi = to_local(wi_w, s, t, ns)
+        f = bsdf_eval(bv.mat, wi, wo_b_local)
+        pdf_o = bsdf_pdf(bv.mat, wi, wo_b_local)
+        update(of, k, f, 1.0, pdf_o, pdf_b)
+        of[k, F_PREV_PDF] = pdf_o
+        oi[k, I_STATE] = pc_push(oi[k, I_STATE], lobe_class(bv.mat, False, cfg.threshold))
+    oi[k, I_PREV_DELTA] = 0
+    oi[k, I_RECONN] = MERGED
+    set3(of, k, F_PREV_P, bv.x)
 
 
 @leaf
 def follow_merged(of, oi, k, bv):
-    """:func:`follow` for a MERGED offset, the common case once offsets have reconnected: f' / p =
-    the base's weight, no evaluation. Inlined into the caller's offset loop (a call would pass the
+    """A MERGED offset k (the base path itself from x_b on) follows the base's segment: f' / p = the
+    base's weight, no evaluation. Inlined into the caller's offset loop (a call would pass the
     whole base vertex as arguments, once per offset and segment)."""
     set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), bv.weight))
     of[k, F_PREV_PDF] = bv.pdf
