@@ -42,8 +42,8 @@ import os
 import sys
 import time
 
-# this tree's gdlearn, also when run from a worktree (else the editable install's)
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)        # this tree's gdlearn, also when run from a worktree (else the editable install's)
 
 import numpy as np  # noqa: E402
 
@@ -54,7 +54,6 @@ from gdlearn.experiments.study import Method  # noqa: E402
 from gdlearn.integrators import make  # noqa: E402
 from gdlearn.integrators.path.gpt import MANIFOLD_POLICY, SUPPORTED  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ACTIONS = ("replay", "halfvector", "reconnection", "manifold", "fail")
 
 

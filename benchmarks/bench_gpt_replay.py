@@ -21,8 +21,8 @@ import os
 import sys
 import time
 
-# this tree's gdlearn, also when run from a worktree (else the editable install's)
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)        # this tree's gdlearn, also when run from a worktree (else the editable install's)
 
 import numpy as np  # noqa: E402
 
@@ -31,7 +31,6 @@ from gdlearn.experiments.references import render_reference  # noqa: E402
 from gdlearn.integrators import make  # noqa: E402
 
 SOLVERS = ("cv", "cv-weighted", "l2", "l1")
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def time_per_pass(scene_file, spp, repeat, threads):
