@@ -26,7 +26,10 @@ seconds, passes or photons.
 """
 from __future__ import annotations
 
+import signal
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Iterator
 
@@ -102,6 +105,26 @@ class Frame:
         return out
 
 
+@contextmanager
+def _sigint_deferred():
+    """Hold back Ctrl-C until the block is done, then raise it: the block's updates happen together.
+
+    Only where Python raises ``KeyboardInterrupt`` itself (the main thread, the default handler);
+    elsewhere (a worker thread, a handler someone else installed) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    caught = []
+    signal.signal(signal.SIGINT, lambda *_: caught.append(True))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
 class ProgressiveIntegrator:
     """Base class: the pass loop, timings, NaN/Inf guards and Ctrl-C safety.
 
@@ -143,11 +166,12 @@ class ProgressiveIntegrator:
     def step(self) -> Frame:
         """Render one more pass and return the updated frame."""
         t0 = time.perf_counter()
-        res = self.render_pass(self._passes)
+        res = self.render_pass(self._passes)       # Ctrl-C in here drops this pass, and only it
         wall = time.perf_counter() - t0
-        self._combined.add(res, self._passes)
-        self._elapsed += wall
-        self._passes += 1
+        with _sigint_deferred():       # sums, sample counts and passes move together: a frame is whole
+            self._combined.add(res, self._passes)
+            self._elapsed += wall
+            self._passes += 1
         return self.frame()
 
     def frames(self) -> Iterator[Frame]:

@@ -1,0 +1,68 @@
+"""Ctrl-C (SIGINT) at the worst moments: a frame is never half-updated, and `gdlearn render`
+interrupted before its first pass says so (exit 130) instead of failing on an empty frame.
+
+In process and without numba (tests/experiments_fake.py's integrator): the signal is sent by the
+code under test itself at a chosen point, so the moment is exact, not a race."""
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from gdlearn.integrators import combine
+from gdlearn.integrators.base import render
+from experiments_fake import FakePrimal
+
+pytestmark = pytest.mark.skipif(os.name != "posix", reason="SIGINT sent to the process itself")
+
+
+@pytest.fixture
+def default_sigint():
+    """Python's own handler, as at a terminal: a suite started in the background (`make test &`, a
+    CI runner) inherits SIGINT ignored, and pytest keeps that."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+def test_ctrl_c_while_a_pass_is_folded_in_keeps_the_frame_whole(default_sigint, monkeypatch):
+    # SIGINT arrives at the end of MeanOfPasses.add of the third pass, after its sums and sample
+    # counts were updated and before the frame's spp and pass count: without the deferral in
+    # ProgressiveIntegrator.step the frame would show three passes' mean and say two.
+    # signal.raise_signal runs Python's handler before it returns: the moment is exact.
+    bookkeeping = combine._Combine._bookkeeping
+
+    def signal_then_bookkeeping(self, res):
+        if self.spp == 2:
+            signal.raise_signal(signal.SIGINT)
+        bookkeeping(self, res)
+
+    monkeypatch.setattr(combine._Combine, "_bookkeeping", signal_then_bookkeeping)
+    integ = FakePrimal(seed=4, h=2, w=3)
+    frame = render(integ, passes=10)
+    assert frame.interrupted and frame.passes == 3 and frame.spp == 3
+    # the mean of the three passes, recomputed independently of the combine's bookkeeping
+    passes = [FakePrimal(seed=4, h=2, w=3).render_pass(i).images["primal"] for i in range(3)]
+    assert np.allclose(frame.primal, np.mean(passes, axis=0), rtol=1e-12)
+    # Python's handler is back: a later Ctrl-C is a KeyboardInterrupt again
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_render_command_interrupted_before_the_first_pass_writes_nothing(default_sigint, monkeypatch,
+                                                                         tmp_path, capsys):
+    # The first pass is interrupted: the frame is empty. The command must say so and exit 130,
+    # not fail on `frame.primal` with a KeyError (exit 1; seen on a loaded CI machine).
+    from gdlearn.cli import main
+    from gdlearn.integrators.path import pt
+
+    def interrupted(self, pass_index):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pt.PathTracer, "compile", lambda self: 0.0)
+    monkeypatch.setattr(pt.PathTracer, "render_pass", interrupted)
+    out = tmp_path / "x.npy"
+    scene = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes",
+                         "cornell-box.xml")
+    assert main(["render", scene, "--spp", "4", "--set", "res=8", "--out", str(out), "--no-progress"]) == 130
+    assert "interrupted before the first pass; nothing written" in capsys.readouterr().err
+    assert not out.exists()
