@@ -101,7 +101,8 @@ def _continue(sa, of, oi, k, action, medium_o, mat_o, bv, nx, cfg, stack):
     return ok, lcls, pdf_o, delta_o
 
 
-@noalloc
+# inlined: see gpt_volume.vertex.pair
+@leaf
 def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, stack):
     """Shift a not yet reconnected offset along the base's segment x_b -> x_{b+1} by a mixed policy
     (``bv``, ``nx``: :class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``). Returns False

@@ -133,7 +133,11 @@ def scale_log(of, k, log_f, log_p):
                          b[2] * math.exp(log_f[2] - log_p)))
 
 
-@noalloc
+# pair, nee_offset, nee_pairs (and mixed.shift_free_mixed) are inlined: they run per offset and
+# vertex, and a call passes the scene's arrays and the vertex tuples as well over a hundred scalars.
+# Inlining them made gpt's passes in media 1.4-1.7x faster; inlining more made them slower again
+# (benchmarks/README.md, "gpt in media: inlined offset steps").
+@leaf
 def pair(diff, summ, of, oi, k, co, cb, cfg):
     """Eq. 16 with Eq. 17's weight for one technique: D += w (C' - C), S += w C'; a failed shift
     D -= C (w = 1, offset 0). w = 0 (offset density overwhelming) adds nothing, even if C' overflowed.
@@ -160,7 +164,7 @@ def pair(diff, summ, of, oi, k, co, cb, cfg):
 TR_UNKNOWN = (-1.0, -1.0, -1.0)
 
 
-@noalloc
+@leaf
 def nee_offset(sa, em, q, nq, of, oi, k, stack, tr_known, m_known):
     """Next event of offset k's vertex towards the fixed light point q (area Jacobian 1): Le / pdf,
     the BSDF (surface) or phase function (medium), the transmittance of the offset's *own* shadow
@@ -185,7 +189,7 @@ def nee_offset(sa, em, q, nq, of, oi, k, stack, tr_known, m_known):
     return sc3(mul3(mul3(f, w_em), tr), mw)
 
 
-@noalloc
+@leaf
 def nee_pairs(sa, em, q, nq, p, nb, tr_b, m_b, cb, of, oi, diff, summ, cfg, medium_vertex, stack):
     """Shift the base's next-event sample (light point q, unweighted value nb) to every live offset
     by reconnecting to the same light point (directional / constant: the same direction). An offset
