@@ -65,7 +65,7 @@ from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
                                    SHIFT_RECONNECT, SHIFT_REPLAY, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
-from gdlearn.kernels.jit import block, inlined, leaf, noalloc
+from gdlearn.kernels.jit import inlined, leaf, noalloc
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
 from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, NextVertex
 
@@ -317,7 +317,9 @@ def _manifold_segment(sa, mtab, k, of, oi, m, cf, ci, cfg, bv, stats, stack):
         oi[k, I_ALIVE] = FAILED
 
 
-@block
+# inlined (leaf): called per base vertex with the scene's arrays and the vertex tuples as arguments;
+# the mtab-is-None pruning still happens (numba types it as a function of its own first)
+@leaf
 def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
     """Extend every live offset by the segment the base just sampled, x_b = ``bv.x`` -> x_{b+1} = ``nx.p``
     along ``nx.d`` (:class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``). ``m`` > 0: the
