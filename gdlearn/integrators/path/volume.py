@@ -70,7 +70,9 @@ def roulette(beta, eta, depth, rr_depth, u):
     return True, (beta[0] / q, beta[1] / q, beta[2] / q)
 
 
-@noalloc
+# inlined: gpt's media kernel calls it per vertex and offset, and the call line alone held 9 % of a
+# fog-box pass (passing the scene's arrays); the cold compile did not move (benchmarks/README.md)
+@leaf
 def shadow_transmittance(sa, p, ng, q, medium, stack):
     """Transmittance from p (surface normal ng, or zeros in a medium) to q, crossing null interfaces
     and the media between them; 0 if any non-null surface blocks the segment."""
