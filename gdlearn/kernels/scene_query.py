@@ -14,17 +14,14 @@ import numpy as np
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
 from gdlearn.kernels.geometry import offset_origin, surface
 from gdlearn.kernels.vec import dot
-from gdlearn.kernels.jit import inlined, noalloc
+from gdlearn.kernels.jit import inlined, leaf, noalloc
 
 #: Relative shortening of shadow rays so they stop just before the point they connect to (Mitsuba's
 #: ``ShadowEpsilon`` idea); the origin is already pushed off its surface by ``offset_origin``.
 SHADOW_EPS = 1e-7
 
 
-# Not inlined (the shifts call it from many places), but with the traversal inlined into it and no
-# reference counts: one call per ray instead of two, each passing the scene's arrays as dozens of
-# scalars (gpt 1.1-1.2x faster per pass, benchmarks/README.md "gpt: fewer calls per ray").
-@noalloc
+@leaf
 def intersect(sa, o, d, tmin, tmax, stack):
     """Closest hit of the ray o + t d, t in (tmin, tmax).
 
@@ -32,11 +29,19 @@ def intersect(sa, o, d, tmin, tmax, stack):
     normal (build the shading frame with ``vec.coordinate_system(ns)``), ``front`` True when the
     ray arrives on the side ``ng`` points to. On a miss hit is False and t = inf.
     """
-    t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, tmin, tmax, stack)
+    return _intersect(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, tmin, tmax, stack)
+
+
+# Not inlined (the shifts call intersect from many places), but with the traversal inlined into it,
+# no reference counts, and only the four arrays it reads as arguments: a call passes each array as
+# about seven scalars, the whole scene as over a hundred (benchmarks/README.md, session 13).
+@noalloc
+def _intersect(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+    t, prim, u, v = closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)
     if prim < 0:
         z = (0.0, 0.0, 0.0)
         return False, math.inf, -1, z, z, z, False
-    p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
+    p, ng, ns = surface(prims, prim_info, prim, o, d, t, u, v)
     return True, t, prim, p, ng, ns, dot(d, ng) < 0.0
 
 
