@@ -1,8 +1,9 @@
 """Ctrl-C (SIGINT) at the worst moments: a frame is never half-updated, and `gdlearn render`
 interrupted before its first pass says so (exit 130) instead of failing on an empty frame.
 
-In process and without numba (tests/experiments_fake.py's integrator): the signal is sent by the
-code under test itself at a chosen point, so the moment is exact, not a race."""
+In process and without compiling a kernel (tests/experiments_fake.py's integrator; pt with its
+passes replaced): the signal is sent from inside the code under test at a chosen point, so the
+moment is exact, not a race."""
 import os
 import signal
 

@@ -34,7 +34,8 @@ def intersect(sa, o, d, tmin, tmax, stack):
 
 # Not inlined (the shifts call intersect from many places), but with the traversal inlined into it,
 # no reference counts, and only the four arrays it reads as arguments: a call passes each array as
-# about seven scalars, the whole scene as over a hundred (benchmarks/README.md, session 13).
+# about seven scalars, the whole scene as over a hundred (benchmarks/README.md, "Calls that pass the
+# scene").
 @noalloc
 def _intersect(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     t, prim, u, v = closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)

@@ -136,7 +136,7 @@ def scale_log(of, k, log_f, log_p):
 # pair, nee_offset, nee_pairs (and mixed.shift_free_mixed) are inlined: they run per offset and
 # vertex, and a call passes the scene's arrays and the vertex tuples as well over a hundred scalars.
 # Inlining them made gpt's passes in media 1.4-1.7x faster; inlining more made them slower again
-# (benchmarks/README.md, "gpt in media: inlined offset steps").
+# (benchmarks/README.md, "Calls that pass the scene").
 @leaf
 def pair(diff, summ, of, oi, k, co, cb, cfg):
     """Eq. 16 with Eq. 17's weight for one technique: D += w (C' - C), S += w C'; a failed shift
