@@ -10,14 +10,19 @@ at, so two checkouts can be compared in interleaved processes:
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import sys
 import time
 
 import numpy as np
 
-import gdlearn
-from gdlearn.integrators import make
-from gdlearn.scene.load import load
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)        # this tree's gdlearn, also when run from a worktree (else the editable install's)
+
+import gdlearn  # noqa: E402
+from gdlearn.integrators import make  # noqa: E402
+from gdlearn.scene.load import load  # noqa: E402
 
 
 def surface_times(path: str, res: int, photons: int, repeats: int, threads: int):

@@ -10,15 +10,20 @@ The numbers are per-call costs, not an equal-hardware comparison: the path trace
 matters and benchmarks/ has that; this script shows which BSDF is expensive.
 """
 import argparse
+import os
+import sys
 import time
 
 import numpy as np
 from numba import njit
 
-from gdlearn.kernels.bsdf import dispatch as B
-from gdlearn.kernels.media import medium as M
-from gdlearn.kernels.media import phase as P
-from gdlearn.scene.model import BSDF, rgb
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)        # this tree's gdlearn, also when run from a worktree (else the editable install's)
+
+from gdlearn.kernels.bsdf import dispatch as B  # noqa: E402
+from gdlearn.kernels.media import medium as M  # noqa: E402
+from gdlearn.kernels.media import phase as P  # noqa: E402
+from gdlearn.scene.model import BSDF, rgb  # noqa: E402
 
 CASES = [
     ("diffuse", {"type": "diffuse"}, dict(type="diffuse")),

@@ -28,6 +28,7 @@ against the DCT-preconditioned path (the default before the multigrid one).
 """
 import argparse
 import os
+import sys
 import time
 
 # On shared cores, OpenMP threads that spin-wait at every barrier lose most of their time slices:
@@ -35,6 +36,8 @@ import time
 # (active) policy, 1.4 s with passive waiting, 1.4 s on one thread. Must be set before numba
 # starts its OpenMP runtime; an explicit setting in the environment wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)        # this tree's gdlearn, also when run from a worktree (else the editable install's)
 
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
