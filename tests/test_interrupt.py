@@ -1,5 +1,6 @@
-"""Ctrl-C (SIGINT) at the worst moments: a frame is never half-updated, and `gdlearn render`
-interrupted before its first pass says so (exit 130) instead of failing on an empty frame.
+"""Ctrl-C (SIGINT) at the worst moments: a frame is never half-updated; `render` interrupted before
+its first pass raises instead of returning an empty frame, so `gdlearn render` says so (exit 130);
+an interrupted reference is not cached.
 
 In process and without compiling a kernel (tests/experiments_fake.py's integrator; pt with its
 passes replaced): the signal is sent from inside the code under test at a chosen point, so the
@@ -51,8 +52,8 @@ def test_ctrl_c_while_a_pass_is_folded_in_keeps_the_frame_whole(default_sigint, 
 
 def test_render_command_interrupted_before_the_first_pass_writes_nothing(default_sigint, monkeypatch,
                                                                          tmp_path, capsys):
-    # The first pass is interrupted: the frame is empty. The command must say so and exit 130,
-    # not fail on `frame.primal` with a KeyError (exit 1; seen on a loaded CI machine).
+    # The first pass is interrupted: nothing was accumulated. The command must say so and exit 130,
+    # not fail on an empty frame's `frame.primal` with a KeyError (exit 1; seen on a loaded CI machine).
     from gdlearn.cli import main
     from gdlearn.integrators.path import pt
 
@@ -67,3 +68,44 @@ def test_render_command_interrupted_before_the_first_pass_writes_nothing(default
     assert main(["render", scene, "--spp", "4", "--set", "res=8", "--out", str(out), "--no-progress"]) == 130
     assert "interrupted before the first pass; nothing written" in capsys.readouterr().err
     assert not out.exists()
+
+
+class _InterruptedAt(FakePrimal):
+    """Ctrl-C (as Python raises it) inside pass ``at``."""
+
+    at = 0
+
+    def render_pass(self, i):
+        if i == self.at:
+            raise KeyboardInterrupt
+        return super().render_pass(i)
+
+
+def test_render_interrupted_in_its_first_pass_raises():
+    # nothing was accumulated, so there is no frame to return: the interrupt goes on to the caller
+    # (returned, the empty frame failed on `frame.primal` with a KeyError wherever it was used)
+    with pytest.raises(KeyboardInterrupt):
+        render(_InterruptedAt(seed=1, h=2, w=3), passes=10)
+    later = type("Later", (_InterruptedAt,), {"at": 2})(seed=1, h=2, w=3)
+    frame = render(later, passes=10)
+    assert frame.interrupted and frame.passes == 2 and np.isfinite(frame.primal).all()
+
+
+def test_an_interrupted_reference_is_not_cached(tmp_path, monkeypatch):
+    # a reference stopped early has fewer samples than its cache key says: caching it would hand
+    # every later study a noisier reference under the full budget's name
+    from gdlearn.experiments import references as R
+    from gdlearn.teaching.toy import ToyPrimal, ToyScene
+
+    class Stopped(ToyPrimal):
+        def render_pass(self, i):
+            if i == 3:
+                raise KeyboardInterrupt
+            return super().render_pass(i)
+
+    monkeypatch.setenv("GDLEARN_CACHE", str(tmp_path))
+    with pytest.raises(KeyboardInterrupt):
+        R.render_reference(ToyScene(10, 6), Stopped, spp=64, spp_per_pass=8)
+    assert not list(tmp_path.rglob("*.npz"))
+    assert R.render_reference(ToyScene(10, 6), ToyPrimal, spp=64, spp_per_pass=8).spp == 64
+    assert len(list(tmp_path.rglob("*.npz"))) == 1

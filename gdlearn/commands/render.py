@@ -163,9 +163,7 @@ def run(args) -> int:
               f"{f'{spp} spp' if spp else ''}{' / ' if spp and args.time else ''}"
               f"{f'{args.time} s' if args.time else ''} (Ctrl-C saves what is done)", file=sys.stderr, flush=True)
         frame = render(integ, spp=spp, seconds=args.time, progress=not args.no_progress)
-    except KeyboardInterrupt:      # during JIT compilation: nothing accumulated yet
-        frame = None
-    if frame is None or frame.passes == 0:      # Ctrl-C before a pass was folded into the frame
+    except KeyboardInterrupt:      # during JIT compilation or the first pass: nothing accumulated yet
         print("gdlearn render: interrupted before the first pass; nothing written", file=sys.stderr)
         return 130
     image = frame.primal

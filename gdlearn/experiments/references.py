@@ -180,6 +180,8 @@ def render_reference(scene, estimator="pt", spp: int = 1024, seed: int = 1_000_0
         return load_reference(path)
     integ = make_integrator(estimator, load_scene(scene), seed, spp_per_pass, **options)
     frame = render(integ, spp=spp)
+    if frame.interrupted:          # fewer samples than the key says: neither cached nor handed back
+        raise KeyboardInterrupt
     ref = Reference(frame.primal, frame.variance() if frame.passes >= 2 else None, frame.spp,
                     getattr(integ, "name", str(estimator)), key)
     if cache:

@@ -198,7 +198,8 @@ def render(integrator: ProgressiveIntegrator, spp: int | None = None, seconds: f
     """Run ``integrator`` until ``spp`` samples per pixel, ``seconds`` of wall time, ``passes`` passes
     or ``photons`` light paths, whichever comes first (at least one pass; with no budget, the scene's
     spp). JIT compilation happens first and is not counted. Ctrl-C stops early and returns what was
-    accumulated, with ``frame.interrupted`` set."""
+    accumulated, with ``frame.interrupted`` set; before the first pass was accumulated there is
+    nothing to return, and the ``KeyboardInterrupt`` goes on to the caller."""
     if spp is None and seconds is None and passes is None and photons is None:
         spp = getattr(integrator.scene.sensor, "spp", 4)
     integrator.warmup()
@@ -221,6 +222,8 @@ def render(integrator: ProgressiveIntegrator, spp: int | None = None, seconds: f
                 break
     except KeyboardInterrupt:
         frame = integrator.frame(interrupted=True)
+        if frame.passes == 0:          # an empty frame has no images: not a result to hand back
+            raise
     finally:
         if bar is not None:
             bar.close()
