@@ -19,7 +19,8 @@ from numba.core import types
 from numba.core.dispatcher import Dispatcher
 
 from gdlearn.integrators import make
-from gdlearn.integrators.path.gpt_surface.lockstep import gpt_sample
+from gdlearn.integrators.path.gpt import _gpt_rows
+from gdlearn.integrators.path.gpt_surface.manifold import lookahead_chain, manifold_offset
 from gdlearn.kernels.jit import block
 from gdlearn.scene.load import load
 
@@ -58,7 +59,8 @@ def _compile_and_report():
         integ = make(name, scene, seed=0, spp_per_pass=1, threads=1)
         integ.warmup()
     print(json.dumps({"copies": [str(c[0]) for c in _copies()], "manifold": integ.manifold,
-                      "mtab": sorted({str(sig[9]) for sig in gpt_sample.signatures})}))
+                      "mtab": sorted({str(sig[8]) for sig in _gpt_rows.signatures}),
+                      "walk": len(lookahead_chain.signatures) + len(manifold_offset.signatures)}))
 
 
 def test_pt_and_gpt_compile_each_function_once_per_type(tmp_path):
@@ -67,8 +69,9 @@ def test_pt_and_gpt_compile_each_function_once_per_type(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     rep = json.loads(r.stdout.strip().splitlines()[-1])
     assert rep["copies"] == []
-    # the default gpt kernel on the Cornell box types gpt_sample for mtab None only: no manifold code
-    assert not rep["manifold"] and rep["mtab"] == ["none"]
+    # the default gpt kernel on the Cornell box types its rows (and gpt_sample, IR-inlined into them)
+    # for mtab None only: no manifold code, the walk's functions never typed
+    assert not rep["manifold"] and rep["mtab"] == ["none"] and rep["walk"] == 0
 
 
 def _planted_callee(a, k):

@@ -20,7 +20,7 @@ from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS
 from gdlearn.integrators.path.packet_volume import trace_items_volume
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrowed
-from gdlearn.kernels.jit import block, ir_inline, leaf
+from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
 from gdlearn.kernels.threads import next_rows, run_rows
 from gdlearn.shifts.replay import offset_film_position, shift_q
 
@@ -69,7 +69,8 @@ def _rows(sa, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, out
                  items, obuf, oitems, oref, oq, acc, stack, surface, volume)
 
 
-@leaf
+# a call of its own: the row calls it twice (bases, offsets), and the packet loops are IR-inlined here
+@noalloc
 def _trace(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack, surface, volume):
     if surface is not None:
         trace_items(sa, items, m, seed, max_depth, rr_depth, S, Q, buf, stack)

@@ -331,8 +331,9 @@ def _finish(sa, S, Q, buf, nxt, nitems, items, seed):
     return nxt, busy
 
 
-# not inlined: called once per chunk of up to N_ITEMS paths, and gpt-replay's row calls it twice
-@noalloc
+# IR-inlined into its callers (pt's row, gpt-replay's non-inlined ``_trace``): as a function of its
+# own it was compiled twice, in its own library and again in the caller's (kernels.jit)
+@ir_inline
 def trace_items(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
     """The radiance of the camera paths of items 0 .. nitems-1 of the table ``items`` (film
     position, key, sample: :data:`IT_FX` ...) into ``buf[3 i : 3 i + 3]``, each path

@@ -321,7 +321,7 @@ def _finish(sa, S, Q, buf, nxt, nitems, items, seed):
     return nxt, busy
 
 
-@noalloc
+@ir_inline
 def trace_items_volume(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
     """:func:`gdlearn.integrators.path.packet.trace_items` with ``radiance_volpath``'s paths."""
     nxt = 0

@@ -65,7 +65,7 @@ from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
                                    SHIFT_RECONNECT, SHIFT_REPLAY, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
-from gdlearn.kernels.jit import inlined, leaf, noalloc
+from gdlearn.kernels.jit import inlined, ir_inline, leaf, noalloc
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
 from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, NextVertex
 
@@ -380,7 +380,7 @@ def cls_next_of(sa, hit2, prim2, cfg):
     return vclass_of(sa, not hit2, prim2, cfg)
 
 
-@noalloc
+@ir_inline
 def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     """One base path through film point (fx, fy) of pixel (x, y) (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`, random numbers ``rng``: ``PathRng``) and its four shifts. Returns the
@@ -389,9 +389,12 @@ def gpt_sample(sa, px, rng, cfg, of, oi, diff, stats, stack, mtab, cf, ci):
     MIS-weighted offset contribution sum w C' of shift k (:func:`_pair`). ``mtab``: the manifold
     shape table, or None for a specialisation without the manifold walk: numba prunes the
     ``mtab is not None`` branches of a None argument before typing, so the walk (a third of gpt's
-    compile) is compiled only for the manifold kernel. Compiled without reference counting, as are
-    the callees that inherit numba's flags from it; the walk's ``manifold_offset``, which allocates
-    its scratch arrays, asks for them itself."""
+    compile) is compiled only for the manifold kernel (the pruning also works IR-inlined: numba
+    prunes again after inlining, and ``mtab`` is then the rows kernel's own argument).
+
+    IR-inlined into its one caller, ``gpt._gpt_rows``: as a function of its own it was compiled
+    twice, once in its own library and again in the rows kernel's, which links its callees' code in
+    and optimises and emits it anew (~7 s of a cold compile; kernels.jit)."""
     h = path_state(rng.seed, rng.key, rng.s)     # hashed once: each number is then one finaliser (rng)
     diff[:] = 0.0
     o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)

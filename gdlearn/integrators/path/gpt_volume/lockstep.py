@@ -273,11 +273,12 @@ def _roulette_all(of, oi, beta, eta, depth, cfg, u):
     return True, (beta[0] / q, beta[1] / q, beta[2] / q)
 
 
-@noalloc
+@ir_inline
 def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
     """One volpath base path through film point (fx, fy) of pixel (x, y) (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`; random numbers ``rng``: ``PathRng``) and its four shifts.
-    Returns L; ``diff[k]`` / ``summ[k]`` receive D_k / S_k of shift k (right, left, down, up)."""
+    Returns L; ``diff[k]`` / ``summ[k]`` receive D_k / S_k of shift k (right, left, down, up).
+    IR-inlined into :func:`_gpt_volume_rows`, so that it is compiled once (as ``gpt_sample``)."""
     seed, key, s = rng.seed, rng.key, rng.s
     diff[:] = 0.0
     summ[:] = 0.0
