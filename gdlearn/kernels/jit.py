@@ -56,6 +56,15 @@ the fog box's pass was 13 % slower with the packet's ``_shade`` IR-inlined into 
 gpt's surface pass 7-10 % slower with its next-event and offset-start steps IR-inlined; those stay
 leaves.
 
+The same holds one level up: a large non-inlined function with one caller is compiled twice, in
+its own library and in its caller's. gpt's per-sample functions (``gpt_sample``,
+``gpt_volume_sample``) and the packet tracers' chunk loops (``trace_items``, ``trace_items_volume``)
+are therefore IR-inlined into their row drivers, and compiled once: their own libraries had taken
+7-12 s (gpt) and ~2.5 s (pt) of a cold compile, and the passes did not get slower. Not every
+one-caller function gains: IR-inlining gpt's per-vertex shift step (``_shift_offsets``) cost the
+surface passes 3-5 %, and the volume's ``shift_free_mixed`` 20-30 % (benchmarks/README.md,
+"Compiled once").
+
 The photon passes' camera kernels (G-VPM, G-BRE, the surface pass of their full images, VPM and the
 BRE) are row drivers on threads whose per-row and per-photon steps are IR-inlined: G-BRE's cold
 compile went from 372 to 123 s, G-VPM's from 388 to 120 s, and G-BRE's pass got faster

@@ -190,7 +190,8 @@ def _nee_pairs(sa, em, q, nq, p, nb, vis, cb, of, oi, diff, cfg, stack):
         _pair(diff, of, oi, k, co, cb, cfg)
 
 
-@leaf
+# IR-inlined into its one caller, lockstep._shift_offsets: compiled there only (kernels.jit)
+@ir_inline
 def _shift_segment(sa, k, of, oi, cfg, bv, nx, stats, stack):
     """Shift offset k's segment leaving its vertex i (base vertex ``bv``: wi -> wo, decided by its class
     ``bv.cls_s``; next vertex ``nx``: p2 or escape, of class ``nx.cls``)."""
@@ -318,7 +319,9 @@ def _manifold_segment(sa, mtab, k, of, oi, m, cf, ci, cfg, bv, stats, stack):
 
 
 # inlined (leaf): called per base vertex with the scene's arrays and the vertex tuples as arguments;
-# the mtab-is-None pruning still happens (numba types it as a function of its own first)
+# the mtab-is-None pruning still happens (numba types it as a function of its own first). Not
+# IR-inlined into gpt_sample: that saved 5-10 s of the close-up's cold compile but made the surface
+# scenes' passes 3-5 % slower (benchmarks/README.md, "Compiled once")
 @leaf
 def _shift_offsets(sa, of, oi, cfg, bv, nx, stats, stack, mtab, m, cf, ci):
     """Extend every live offset by the segment the base just sampled, x_b = ``bv.x`` -> x_{b+1} = ``nx.p``

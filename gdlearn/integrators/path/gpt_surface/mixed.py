@@ -58,7 +58,7 @@ from gdlearn.kernels.scene_query import intersect, occluded
 from gdlearn.kernels.vec import coordinate_system, to_local, to_world
 from gdlearn.shifts.policy import SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY, mixed_action, mixed_decide, record
 from gdlearn.shifts.reconnection import reconnect
-from gdlearn.kernels.jit import leaf
+from gdlearn.kernels.jit import ir_inline, leaf
 
 ZERO3 = (0.0, 0.0, 0.0)
 
@@ -108,7 +108,8 @@ def _reconnected(sa, of, oi, k, wo_w, prim2, p2, ng2, ns2, stats):
     record(stats, SHIFT_RECONNECT, True)
 
 
-@leaf
+# IR-inlined into its one caller, lockstep._shift_offsets: compiled there only (kernels.jit)
+@ir_inline
 def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
     """Shift offset k's segment leaving its vertex by a mixed policy (module docstring). The base
     leaves x_b = ``bv.x`` (:class:`~gdlearn.integrators.path.params.BaseVertex`: geometric normal ng, material
