@@ -60,7 +60,7 @@ The same holds one level up: a large non-inlined function with one caller is com
 its own library and in its caller's. gpt's per-sample functions (``gpt_sample``,
 ``gpt_volume_sample``) and the packet tracers' chunk loops (``trace_items``, ``trace_items_volume``)
 are therefore IR-inlined into their row drivers, and compiled once: their own libraries had taken
-7-12 s (gpt) and ~2.5 s (pt) of a cold compile, and the passes did not get slower. Not every
+6-12 s (gpt) and ~2.5 s (pt) of a cold compile, and the passes did not get slower. Not every
 one-caller function gains: IR-inlining gpt's per-vertex shift step (``_shift_offsets``) cost the
 surface passes 3-5 %, and the volume's ``shift_free_mixed`` 20-30 % (benchmarks/README.md,
 "Compiled once").

@@ -42,7 +42,7 @@ from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_h
 from gdlearn.kernels.scene_query import shadow_ray
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
-from gdlearn.kernels.jit import block, ir_inline, leaf, noalloc
+from gdlearn.kernels.jit import block, ir_inline, leaf
 
 # float rows (after the traversal's): the ray set of the next closest hit, the shadow ray set,
 # throughput, radiance, beta * next-event term waiting for its shadow ray, previous vertex, its pdf, eta

@@ -65,7 +65,7 @@ from gdlearn.kernels.layout import V_SPECULAR
 from gdlearn.shifts.policy import (POLICY_HALFVECTOR_RECONNECTION_MANIFOLD, SHIFT_FAIL, SHIFT_MANIFOLD,
                                    SHIFT_RECONNECT, SHIFT_REPLAY, is_mixed, record)
 from gdlearn.shifts.replay import neighbour_inside, offset_film_position
-from gdlearn.kernels.jit import inlined, ir_inline, leaf, noalloc
+from gdlearn.kernels.jit import inlined, ir_inline, leaf
 from gdlearn.integrators.path.gpt_volume.flight import EV_ESCAPE, EV_SURFACE
 from gdlearn.integrators.path.params import VB_SURFACE, BaseVertex, NextVertex
 
