@@ -45,6 +45,8 @@ class _Recorder:
             if self.open:
                 self.open[-1][2] += dt
             return
+        if any(frame[0] == kind for frame in self.open):
+            return                               # a re-entered LLVM lock: its outermost holder counts it
         for frame in reversed(self.open):        # LLVM time goes to the innermost open compile
             if frame[0] == "numba:compile":
                 frame[3] += dt
@@ -54,7 +56,10 @@ class _Recorder:
 def _listener():
     from numba.core.event import Listener       # numba is imported only once its cache folder is set
 
-    return type("Recorder", (_Recorder, Listener), {})()
+    class Recorder(_Recorder, Listener):
+        pass
+
+    return Recorder()
 
 
 def main(argv=None):
