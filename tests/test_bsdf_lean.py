@@ -1,17 +1,20 @@
-"""Scenes of diffuse and null materials only get kernels compiled without the other BSDF families
-(gdlearn.kernels.bsdf.dispatch: a read-only material table), and those kernels render the image
-of the full ones bit for bit.
+"""Scenes get kernels compiled without the BSDF families they do not have
+(gdlearn.kernels.bsdf.tiers: the material table's tier, named by its write flag and memory
+order), and those kernels render the image of the full ones bit for bit.
 
-The lean and the full kernel run the same diffuse and null code in the same order, so any
-difference is a bug: a family left out that the scene has (its surfaces would turn black), or a
-lean branch that differs from the full one.
+A lean or smooth kernel runs the same code as the full one on its families, in the same order,
+so any difference is a bug: a family left out that the scene has (its surfaces would turn black),
+or a tier's branch that differs from the full one.
 """
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
 from gdlearn.integrators import make
+from gdlearn.kernels import layout as L
+from gdlearn.kernels.bsdf.tiers import table_tier, tiered_table
 from gdlearn.scene.compile import compile_scene
 from gdlearn.scene.load import load
 
@@ -19,13 +22,47 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted(p.stem for p in (ROOT / "scenes").glob("*.xml"))
 
 
+def _expected_tier(types):
+    """The rule, written from the BSDF type names (not from the code's constants)."""
+    if types <= {"diffuse", "null"}:
+        return "lean"
+    if types <= {"diffuse", "null", "conductor", "dielectric"}:
+        return "smooth"
+    return "all"
+
+
 @pytest.mark.parametrize("name", SCENES)
-def test_the_table_is_read_only_exactly_when_every_bsdf_is_diffuse_or_null(name):
-    """The rule, read from the scene file's BSDF types (not from the table the code built)."""
+def test_the_table_form_follows_the_scene_files_bsdf_types(name):
+    """Read from the scene file's BSDF types: lean = read-only row-major, smooth = read-only
+    column-major, every other scene a writable table."""
     scene = load(ROOT / "scenes" / f"{name}.xml", res=4)
     types = {b.type for b in _bsdfs(scene)}
     sa = compile_scene(scene)
-    assert sa.materials.flags.writeable == (not types <= {"diffuse", "null"}), types
+    tier = _expected_tier(types)
+    assert sa.materials.flags.writeable == (tier == "all"), types
+    assert (tier == "smooth") == (not sa.materials.flags.c_contiguous), types
+    # what numba sees: a row's layout and write flag, which dispatch._tier reads
+    row = numba.typeof(sa.materials[0])
+    assert (row.mutable, row.layout) == {"lean": (False, "C"), "smooth": (False, "A"), "all": (True, "C")}[tier]
+
+
+def test_every_tier_is_met_by_a_shipped_scene():
+    """Else the image tests below would not cover it."""
+    tiers = {_expected_tier({b.type for b in _bsdfs(load(ROOT / "scenes" / f"{n}.xml", res=4))}) for n in SCENES}
+    assert tiers == {"lean", "smooth", "all"}
+
+
+def test_a_one_row_table_outside_the_lean_tier_gets_every_family():
+    """A column-major table of one row is row-major too: read-only it would be typed lean and a
+    dielectric would render black. It is given the full tier instead."""
+    row = np.zeros((1, L.MAT_WIDTH))
+    row[0, L.MAT_TYPE] = L.DIELECTRIC
+    assert table_tier(row) == "all"
+    assert tiered_table(row).flags.writeable
+    two = np.zeros((2, L.MAT_WIDTH))
+    two[:, L.MAT_TYPE] = (L.DIELECTRIC, L.DIFFUSE)
+    assert table_tier(two) == "smooth"
+    assert numba.typeof(tiered_table(two)[0]).layout == "A"
 
 
 def _bsdfs(scene):
@@ -33,13 +70,19 @@ def _bsdfs(scene):
 
 
 def _full(sa):
-    """The same scene with a writable table: numba compiles the kernels with every family."""
-    return sa._replace(materials=np.array(sa.materials))
+    """The same scene with a writable row-major table: numba compiles the kernels with every family."""
+    table = np.ascontiguousarray(sa.materials).copy()
+    table.flags.writeable = True
+    return sa._replace(materials=table)
 
 
+# a smooth pair per integrator kind: glass on diffuse (the close-up), glass in a medium, mirrors
 @pytest.mark.parametrize("integrator, name", [("pt", "cornell-box"), ("pt", "medium-cube"),
-                                              ("gpt", "cornell-box"), ("pt", "fog-box")])
-def test_lean_kernels_render_the_full_kernels_image(integrator, name):
+                                              ("gpt", "cornell-box"), ("pt", "fog-box"),
+                                              ("pt", "caustic-closeup"), ("gpt", "caustic-closeup"),
+                                              ("pt", "volume-caustic"), ("gpt", "caustics-box"),
+                                              ("gpt-replay", "mirror-caustic")])
+def test_tiered_kernels_render_the_full_kernels_image(integrator, name):
     scene = load(ROOT / "scenes" / f"{name}.xml", res=10)
     sa = compile_scene(scene)
     assert not sa.materials.flags.writeable
@@ -50,6 +93,6 @@ def test_lean_kernels_render_the_full_kernels_image(integrator, name):
         assert np.array_equal(a[k], b[k]), k
 
 
-def test_a_scene_with_glass_keeps_every_family():
-    sa = compile_scene(load(ROOT / "scenes" / "volume-caustic.xml", res=4))
+def test_a_scene_with_rough_materials_keeps_every_family():
+    sa = compile_scene(load(ROOT / "scenes" / "glossy-box.xml", res=4))
     assert sa.materials.flags.writeable

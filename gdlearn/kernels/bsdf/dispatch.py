@@ -15,15 +15,11 @@ Conventions (Mitsuba 3's ``BSDF`` interface, ``include/mitsuba/render/bsdf.h``):
 
 The per-type kernels live in bsdf_diffuse / bsdf_conductor / bsdf_dielectric / bsdf_plastic.
 
-**Compiling only the families a scene has.** A scene whose materials are all ``diffuse`` or ``null``
-(the Cornell box, the fog box, the media behind null interfaces) has its material table marked
-read-only by :func:`gdlearn.scene.compile.compile_scene` (:func:`lean_table`). numba types a
-read-only array apart from a writable one, so every kernel that reads ``sa.materials`` is compiled
-for that scene on its own, and there :func:`bsdf_sample`, :func:`bsdf_eval` and :func:`bsdf_pdf` are
-typed with the diffuse and null branches only (:func:`_sample_front` and its siblings choose their
-body from the type). The conductors, dielectrics and plastics, inlined into every caller, were a
-quarter of ``pt``'s cold compile on the fog box. A writable table (any other scene, a row made by
-:func:`material_row`) gets every family.
+**Compiling only the families a scene has**: the material table's tier
+(:mod:`gdlearn.kernels.bsdf.tiers`). The ``_front`` stubs below and the rough plastic's class
+helpers are typed by ``overload`` with the body of the row's tier, so the lean and smooth kernels
+never type the families they cannot meet. The smooth families add delta lobes only, which
+``bsdf_eval`` and ``bsdf_pdf`` do not see: their bodies are the lean ones.
 """
 import math
 
@@ -41,6 +37,7 @@ from gdlearn.kernels.bsdf.plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plas
                                           prepare_plastic, roughplastic_coat_fraction, roughplastic_eval,
                                           roughplastic_pdf, roughplastic_sample, roughplastic_spec_prob)
 from gdlearn.kernels.jit import INLINED_OPTIONS, block, inlined
+from gdlearn.kernels.bsdf.tiers import tier_of
 
 ZERO3 = (0.0, 0.0, 0.0)
 
@@ -53,23 +50,6 @@ def _flips(mat, wi):
             and t != L.ROUGHDIELECTRIC and t != L.NULL)
 
 
-#: the BSDF types a read-only (lean) material table may hold
-LEAN_TYPES = (L.DIFFUSE, L.NULL)
-
-
-def lean_table(materials: np.ndarray) -> bool:
-    """Does this material table hold only :data:`LEAN_TYPES` (so kernels may leave the other
-    families out when it is passed read-only)?"""
-    return bool(np.isin(materials[:, L.MAT_TYPE].astype(np.int64), LEAN_TYPES).all())
-
-
-def _lean(mat) -> bool:
-    """At typing: is ``mat`` (a numba type) a row of a read-only table, one :func:`lean_table`
-    accepted? The ``_front`` stubs below are typed by ``overload`` with the lean body then, and
-    inlined as :func:`gdlearn.kernels.jit.inlined` functions are."""
-    return not getattr(mat, "mutable", True)
-
-
 def _compiled_only(*args):
     raise NotImplementedError("compiled code only: call bsdf_sample / bsdf_eval / bsdf_pdf")
 
@@ -78,6 +58,19 @@ def _sample_lean(mat, wi, u_lobe, u1, u2):
     t = int(mat[L.MAT_TYPE])
     if t == L.DIFFUSE:
         return diffuse_sample(mat, wi, u1, u2)
+    if t == L.NULL:
+        return (-wi[0], -wi[1], -wi[2]), (1.0, 1.0, 1.0), 1.0, True
+    return ZERO3, ZERO3, 0.0, False
+
+
+def _sample_smooth(mat, wi, u_lobe, u1, u2):
+    t = int(mat[L.MAT_TYPE])
+    if t == L.DIFFUSE:
+        return diffuse_sample(mat, wi, u1, u2)
+    if t == L.CONDUCTOR:
+        return conductor_sample(mat, wi)
+    if t == L.DIELECTRIC:
+        return dielectric_sample(mat, wi, u_lobe)
     if t == L.NULL:
         return (-wi[0], -wi[1], -wi[2]), (1.0, 1.0, 1.0), 1.0, True
     return ZERO3, ZERO3, 0.0, False
@@ -110,7 +103,7 @@ def _sample_front(mat, wi, u_lobe, u1, u2):
 
 @overload(_sample_front, jit_options=INLINED_OPTIONS)
 def _sample_front_typed(mat, wi, u_lobe, u1, u2):
-    return _sample_lean if _lean(mat) else _sample_front_all
+    return {"lean": _sample_lean, "smooth": _sample_smooth, "all": _sample_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -155,7 +148,7 @@ def _eval_front(mat, wi, wo):
 
 @overload(_eval_front, jit_options=INLINED_OPTIONS)
 def _eval_front_typed(mat, wi, wo):
-    return _eval_lean if _lean(mat) else _eval_front_all
+    return {"lean": _eval_lean, "smooth": _eval_lean, "all": _eval_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -193,7 +186,7 @@ def _pdf_front(mat, wi, wo):
 
 @overload(_pdf_front, jit_options=INLINED_OPTIONS)
 def _pdf_front_typed(mat, wi, wo):
-    return _pdf_lean if _lean(mat) else _pdf_front_all
+    return {"lean": _pdf_lean, "smooth": _pdf_lean, "all": _pdf_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -233,6 +226,44 @@ def bsdf_eta(mat, wi, wo):
     return 1.0
 
 
+def _spec_prob_all(mat, cos_i):
+    return roughplastic_spec_prob(mat, cos_i)
+
+
+def _coat_fraction_all(mat, wi, wo):
+    return roughplastic_coat_fraction(mat, wi, wo)
+
+
+# a lean or smooth tier has no rough plastic: its callers never reach these there
+def _no_spec_prob(mat, cos_i):
+    return 0.0
+
+
+def _no_coat_fraction(mat, wi, wo):
+    return 0.0
+
+
+def _spec_prob_tiered(mat, cos_i):
+    _compiled_only()
+
+
+@overload(_spec_prob_tiered, jit_options=INLINED_OPTIONS)
+def _spec_prob_typed(mat, cos_i):
+    """:func:`roughplastic_spec_prob` where the tier has rough plastics (its callers test the type
+    first), typed for the other tiers without the plastic's tables."""
+    return _spec_prob_all if tier_of(mat) == "all" else _no_spec_prob
+
+
+def _coat_fraction_tiered(mat, wi, wo):
+    _compiled_only()
+
+
+@overload(_coat_fraction_tiered, jit_options=INLINED_OPTIONS)
+def _coat_fraction_typed(mat, wi, wo):
+    """As :func:`_spec_prob_typed`, for :func:`roughplastic_coat_fraction`."""
+    return _coat_fraction_all if tier_of(mat) == "all" else _no_coat_fraction
+
+
 @block
 def vertex_class(mat, threshold):
     """How a path vertex on this material scatters, for shift mappings and effect classification.
@@ -270,7 +301,7 @@ def sampled_lobe_class(mat, wi, u_lobe, is_delta, threshold):
     cos_i = -wi[2] if _flips(mat, wi) else wi[2]
     if cos_i <= 0.0:
         return L.V_DIFFUSE
-    if u_lobe < roughplastic_spec_prob(mat, cos_i):
+    if u_lobe < _spec_prob_tiered(mat, cos_i):
         return L.V_GLOSSY if mat[L.MAT_ALPHA] >= threshold else L.V_SPECULAR
     return L.V_DIFFUSE
 
@@ -305,7 +336,7 @@ def nee_class_share(mat, wi, wo, want_coat, want_rest):
         return 1.0                      # one class: both flags are equal, so this is unreachable
     if _flips(mat, wi):
         wi, wo = (wi[0], wi[1], -wi[2]), (wo[0], wo[1], -wo[2])
-    k = roughplastic_coat_fraction(mat, wi, wo)
+    k = _coat_fraction_tiered(mat, wi, wo)
     return k if want_coat else 1.0 - k
 
 

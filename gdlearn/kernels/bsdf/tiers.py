@@ -1,0 +1,59 @@
+"""Which BSDF families a kernel is compiled with: the material table's *tier*.
+
+numba compiles a kernel once per type of its arguments, and it types an array's write flag and
+memory order. :func:`gdlearn.scene.compile.compile_scene` hands the kernels the material table in
+one of three forms (:func:`tiered_table`), chosen by the families the scene has, and every kernel
+that reads ``sa.materials`` is compiled per form:
+
+======  ================================================  ================================
+tier    BSDF families                                     the table numba is given
+======  ================================================  ================================
+lean    diffuse, null (:data:`LEAN_TYPES`)                read-only, row-major
+smooth  + conductor, dielectric (:data:`SMOOTH_TYPES`)    read-only, column-major
+all     every family                                      writable (a row made by
+                                                          ``dispatch.material_row``, a user's table)
+======  ================================================  ================================
+
+:mod:`gdlearn.kernels.bsdf.dispatch` reads the tier from a row's type (:func:`tier_of`) and types
+``bsdf_sample``, ``bsdf_eval`` and ``bsdf_pdf`` with that tier's families only. The plastics and
+the rough families, inlined into every caller, were a quarter of ``pt``'s cold compile on the fog
+box, and more than a third of gpt's on the glass sphere close-up (benchmarks/README.md, "Only the
+families a scene has"). A column-major table of one row is row-major too (numpy sets both flags),
+so a one-material scene outside the lean tier gets every family. The rule is checked against each
+shipped scene file, and the tiers' images against the full kernels', in tests/test_bsdf_lean.py.
+"""
+import numpy as np
+
+from gdlearn.kernels import layout as L
+
+#: the BSDF types of a lean material table (read-only, row-major)
+LEAN_TYPES = (L.DIFFUSE, L.NULL)
+#: the BSDF types of a smooth one (read-only, column-major): the lean ones and the delta-only families
+SMOOTH_TYPES = LEAN_TYPES + (L.CONDUCTOR, L.DIELECTRIC)
+
+
+def table_tier(materials: np.ndarray) -> str:
+    """"lean", "smooth" or "all": the smallest tier whose families hold every row of ``materials``."""
+    types = materials[:, L.MAT_TYPE].astype(np.int64)
+    if np.isin(types, LEAN_TYPES).all():
+        return "lean"
+    if np.isin(types, SMOOTH_TYPES).all() and materials.shape[0] > 1:
+        return "smooth"
+    return "all"
+
+
+def tiered_table(materials: np.ndarray) -> np.ndarray:
+    """A copy of ``materials`` in the form of its tier (:func:`table_tier`): the kernels compiled for
+    it leave the other BSDF families out."""
+    tier = table_tier(materials)
+    table = np.array(materials, dtype=np.float64, order="F" if tier == "smooth" else "C")
+    table.flags.writeable = tier == "all"
+    return table
+
+
+def tier_of(mat) -> str:
+    """At typing: the tier of the table that ``mat`` (a numba array type) is a row of. A row of a
+    read-only row-major table is row-major; of a column-major one, strided (layout "A")."""
+    if getattr(mat, "mutable", True):
+        return "all"
+    return "lean" if mat.layout == "C" else "smooth"
