@@ -71,30 +71,26 @@ def _sample_smooth(mat, wi, u_lobe, u1, u2):
         return conductor_sample(mat, wi)
     if t == L.DIELECTRIC:
         return dielectric_sample(mat, wi, u_lobe)
-    if t == L.NULL:
+    if t == L.NULL:      # pass straight through with probability 1 (the tracer normally skips it)
         return (-wi[0], -wi[1], -wi[2]), (1.0, 1.0, 1.0), 1.0, True
     return ZERO3, ZERO3, 0.0, False
 
 
+#: the smooth body as a function compiled code can call (the full body ends in it)
+_sample_smooth_inlined = inlined(_sample_smooth)
+
+
 def _sample_front_all(mat, wi, u_lobe, u1, u2):
     t = int(mat[L.MAT_TYPE])
-    if t == L.DIFFUSE:
-        return diffuse_sample(mat, wi, u1, u2)
-    if t == L.CONDUCTOR:
-        return conductor_sample(mat, wi)
     if t == L.ROUGHCONDUCTOR:
         return roughconductor_sample(mat, wi, u1, u2)
-    if t == L.DIELECTRIC:
-        return dielectric_sample(mat, wi, u_lobe)
     if t == L.ROUGHDIELECTRIC:
         return roughdielectric_sample(mat, wi, u_lobe, u1, u2)
     if t == L.PLASTIC:
         return plastic_sample(mat, wi, u_lobe, u1, u2)
     if t == L.ROUGHPLASTIC:
         return roughplastic_sample(mat, wi, u_lobe, u1, u2)
-    if t == L.NULL:      # pass straight through with probability 1 (the tracer normally skips it)
-        return (-wi[0], -wi[1], -wi[2]), (1.0, 1.0, 1.0), 1.0, True
-    return ZERO3, ZERO3, 0.0, False
+    return _sample_smooth_inlined(mat, wi, u_lobe, u1, u2)
 
 
 def _sample_front(mat, wi, u_lobe, u1, u2):
