@@ -41,7 +41,7 @@ def test_the_table_form_follows_the_scene_files_bsdf_types(name):
     tier = _expected_tier(types)
     assert sa.materials.flags.writeable == (tier == "all"), types
     assert (tier == "smooth") == (not sa.materials.flags.c_contiguous), types
-    # what numba sees: a row's layout and write flag, which dispatch._tier reads
+    # what numba sees: a row's layout and write flag, which tiers.tier_of reads
     row = numba.typeof(sa.materials[0])
     assert (row.mutable, row.layout) == {"lean": (False, "C"), "smooth": (False, "A"), "all": (True, "C")}[tier]
 
@@ -71,9 +71,7 @@ def _bsdfs(scene):
 
 def _full(sa):
     """The same scene with a writable row-major table: numba compiles the kernels with every family."""
-    table = np.ascontiguousarray(sa.materials).copy()
-    table.flags.writeable = True
-    return sa._replace(materials=table)
+    return sa._replace(materials=np.array(sa.materials, order="C"))     # a copy: writable
 
 
 # a smooth pair per integrator kind: glass on diffuse (the close-up), glass in a medium, mirrors

@@ -11,7 +11,7 @@ prim_info         i32 (N, INFO_WIDTH)          type, material, emitter, media, s
 prim_area         f64 (N,)                     surface area of each primitive
 nodes, node_info  f64 (K,), i32 (M, 5)         BVH: boxes, leaf lane blocks (kernels/accel/bvh.py)
 materials         f64 (B, MAT_WIDTH)           BSDF rows (kernels/layout.py, bsdf.material_row);
-                                               its write flag and order name its tier (bsdf.dispatch)
+                                               its write flag and order name its tier (bsdf.tiers)
 media             f64 (K, MED_WIDTH)           homogeneous media (sigma_t, albedo, g)
 emitters          f64 (E, EM_WIDTH)            emitter rows (kernels/lights.py)
 em_prims, em_cdf  i32 (P,), f64 (P,)           area emitters' primitives, normalised area CDFs
@@ -333,7 +333,7 @@ def compile_scene(scene: Scene, plan=None) -> SceneArrays:
     media = np.array([_medium_row(m) for m in meds.objs], dtype=np.float64).reshape(-1, L.MED_WIDTH)
     c = np.ascontiguousarray
     # the table's write flag and memory order name the BSDF families it holds: kernels compiled
-    # for it leave the others out (kernels/bsdf/dispatch.py)
+    # for it leave the others out (kernels/bsdf/tiers.py)
     materials = tiered_table(materials)
     return SceneArrays(
         prims=c(rows), prim_info=c(info), prim_area=c(areas), nodes=nodes, node_info=node_info,

@@ -222,6 +222,7 @@ def bsdf_eta(mat, wi, wo):
     return 1.0
 
 
+# an overload returns a Python function, not a compiled one: these wrap the plastic's
 def _spec_prob_all(mat, cos_i):
     return roughplastic_spec_prob(mat, cos_i)
 
