@@ -31,7 +31,9 @@ import math
 
 
 from gdlearn.kernels.bsdf.dispatch import bsdf_is_null
-from gdlearn.kernels.accel.bvh import closest_hit
+# the traversal inlined into the flights: as a call it took the scene's arrays as ~30 scalars per
+# segment (gpt on the medium cube 12 % faster; benchmarks/README.md, issue 20 session 16)
+from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
 from gdlearn.kernels.media.medium import medium_params, sample_distance
 from gdlearn.kernels.rng import rand
@@ -116,7 +118,7 @@ def offset_flight(sa, o, d, tmax, medium, tau, scatter, stack):
     lt = ZERO3
     lp = 0.0
     for _ in range(MAX_SEGMENTS):
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         lands, tl = lands_on_segment(tau, travelled, t)
         if scatter and lands:                        # the copied distance lies on this sub-segment
@@ -164,7 +166,7 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
     remaining = dist if collide else dist * (1.0 - SHADOW_EPS)
     rem_true = dist
     for _ in range(MAX_SEGMENTS):
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, remaining, stack)
         if prim < 0:                                 # reached q
             if medium < 0:
                 return (not collide), lt, lp, medium
@@ -195,7 +197,9 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
     return False, lt, lp, medium
 
 
-@noalloc
+# inlined (leaf): as a call of its own it took the scene as ~100 scalars once per base segment, and
+# gpt's passes in media were 20-30 % slower (benchmarks/README.md, issue 20 session 16)
+@leaf
 def base_flight(sa, o, d, tmax, medium, beta, rng, seg, stack, need_lp):
     """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
     numbers (``rng``: :class:`~gdlearn.integrators.path.params.PathRng`) and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
@@ -209,7 +213,7 @@ def base_flight(sa, o, d, tmax, medium, beta, rng, seg, stack, need_lp):
     lp = 0.0
     tau = 0.0
     while seg < MAX_SEGMENTS:
-        t, prim, u, v = closest_hit(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
+        t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if medium >= 0:
             sig, alb, _ = medium_params(sa.media[medium])

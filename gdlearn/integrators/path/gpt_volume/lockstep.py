@@ -197,7 +197,8 @@ def _emission(sa, nx, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, s
     return cb
 
 
-@noalloc
+# inlined (leaf), as flight.base_flight: one call per base vertex that passed the whole scene
+@leaf
 def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, stack):
     """volpath's next-event sample at the base vertex ``nx`` -- the vertex the last flight reached, a
     medium vertex when ``nx.ev`` is EV_SCATTER (``nee_volume``'s random numbers and arithmetic) -- and its
