@@ -251,7 +251,7 @@ def _any_free(oi):
     return False
 
 
-@noalloc
+@leaf
 def _roulette_all(of, oi, beta, eta, depth, cfg, u):
     """Mitsuba's roulette q = min(max throughput eta^2, 0.95) with the max over the base *and* the
     live offsets (a black base must not stop offsets that still carry light). Returns (alive, beta)."""

@@ -75,7 +75,9 @@ def wanted(cfg, state):
     return (cfg.mask >> pc_class(state)) & 1 == 1
 
 
-@noalloc
+# leaf (inlined), as start_offsets' siblings below that run once per offset and vertex: as calls they
+# took the scene as scalars (gpt on the spot medium and the medium cube 3-5 % faster inlined)
+@leaf
 def start_offsets(sa, px, of, oi):
     """The pixel shift (Eq. 3): the neighbours' camera rays with the base's sub-pixel jitter (``px``:
     :class:`~gdlearn.integrators.path.params.Pixel`), in the camera's medium. Their first flight is
@@ -222,7 +224,7 @@ def nee_pairs(sa, em, q, nq, p, nb, tr_b, m_b, cb, of, oi, diff, summ, cfg, medi
         pair(diff, summ, of, oi, k, co, cb, cfg)
 
 
-@noalloc
+@leaf
 def update(of, k, f, j, pdf_o, pdf_b):
     """beta' *= f' J / p_b and lr += log(p' J / p_b) (-inf when the offset density is 0)."""
     set3(of, k, F_BETA, sc3(mul3(get3(of, k, F_BETA), f), j / pdf_b))
@@ -273,7 +275,7 @@ def reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack):
     return True, pdf
 
 
-@noalloc
+@leaf
 def follow_joined(sa, of, oi, k, bv, cfg):
     """A JOINED offset k shares the base vertex x_b (``bv``,
     :class:`~gdlearn.integrators.path.params.BaseVertex`) and takes the same outgoing direction
@@ -316,7 +318,7 @@ def follow_merged(of, oi, k, bv):
     set3(of, k, F_PREV_P, bv.x)
 
 
-@noalloc
+@leaf
 def push_medium_vertex(oi):
     """Every live offset that has just reached a medium vertex (with the base, or on its own under a
     mixed policy's replayed flight): its class joins the path state."""
