@@ -27,7 +27,10 @@ decorator                 use it for
                           scene's array views were the largest cost of the path kernels; numba
                           refuses ``np.empty`` in such a function, which is the point.
 :func:`noalloc`           as :func:`leaf` but not inlined: a large allocation-free function (a
-                          whole path's radiance) that several kernels call.
+                          whole path's radiance) that several kernels call. A call passes every
+                          array as scalars (the scene: over a hundred), so not for a step run
+                          per vertex: gpt's passes in media were 20-30 % slower with its flights
+                          and next event as noalloc calls.
 :func:`ir_inline`         numba-IR inlining (``inline="always"``): for functions whose arguments
                           are typed per call site (a tuple of arrays of varying layout) or that
                           return small tuples the caller unpacks; and for a large function with one
