@@ -222,7 +222,8 @@ def bsdf_eta(mat, wi, wo):
     return 1.0
 
 
-# an overload returns a Python function, not a compiled one: these wrap the plastic's
+# an overload must return a Python function, not a compiled one: these wrap the rough plastic's
+# compiled helpers
 def _spec_prob_all(mat, cos_i):
     return roughplastic_spec_prob(mat, cos_i)
 

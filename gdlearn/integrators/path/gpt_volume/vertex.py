@@ -75,8 +75,9 @@ def wanted(cfg, state):
     return (cfg.mask >> pc_class(state)) & 1 == 1
 
 
-# leaf (inlined), as start_offsets' siblings below that run once per offset and vertex: as calls they
-# took the scene as scalars (gpt on the spot medium and the medium cube 3-5 % faster inlined)
+# leaf (inlined), as are update, follow_joined and push_medium_vertex below, which run once per offset
+# and vertex: as calls they took the scene as scalars (gpt on the spot medium and the medium cube
+# 3-5 % faster inlined)
 @leaf
 def start_offsets(sa, px, of, oi):
     """The pixel shift (Eq. 3): the neighbours' camera rays with the base's sub-pixel jitter (``px``:
