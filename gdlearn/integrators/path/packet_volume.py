@@ -22,7 +22,7 @@ import numpy as np
 from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, _get3, _set3, _trace, fill_pixel_items,
                                              sum_items, write_row)
 from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
-                                              D_MED_T, D_RR, dim)
+                                              D_MED_T, D_RR, dim, flight_dim)
 from gdlearn.integrators.path.volume import MAX_SEGMENTS, roulette, shadow_march, shadow_start, shadow_step
 from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_PRIM, S_U, S_V
 from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf,
@@ -60,10 +60,10 @@ R_U = R_REM + 1          # 9: D_EM_SEL .. D_MED_CH of this segment, in dim order
 N_S = R_U + 9
 # int rows: path state, depth, segment, item (-1: idle), previous vertex delta, medium, path goes
 # on, next-event term pending (1: its shadow ray is traced, 2: the light point is the vertex),
-# the shadow ray's medium
+# the shadow ray's medium, the bounce (random-number block) and the media its flight passed through
 Q_H = N_Q_TRACE
-Q_DEPTH, Q_SEG, Q_ITEM, Q_DELTA, Q_MED, Q_ALIVE, Q_NEE, Q_SMED = (Q_H + 1 + k for k in range(8))
-N_Q = Q_SMED + 1
+Q_DEPTH, Q_SEG, Q_ITEM, Q_DELTA, Q_MED, Q_ALIVE, Q_NEE, Q_SMED, Q_B, Q_J = (Q_H + 1 + k for k in range(10))
+N_Q = Q_J + 1
 
 
 def eligible(sa, mask, max_depth, possible) -> bool:
@@ -102,6 +102,8 @@ def _start(sa, S, Q, j, item, items, seed):
     Q[Q_H * PK + j] = np.int64(path_state(seed, key, s))
     Q[Q_DEPTH * PK + j] = 0
     Q[Q_SEG * PK + j] = 0
+    Q[Q_B * PK + j] = 0
+    Q[Q_J * PK + j] = 0
     Q[Q_DELTA * PK + j] = 1
     Q[Q_MED * PK + j] = sa.camera_medium
     Q[Q_ITEM * PK + j] = item
@@ -109,12 +111,15 @@ def _start(sa, S, Q, j, item, items, seed):
 
 @leaf
 def _draw(S, Q):
-    """Every lane's random numbers of its segment (dims D_EM_SEL .. D_MED_CH), ahead of the shading."""
+    """Every lane's random numbers of its segment (dims D_EM_SEL .. D_MED_CH), ahead of the shading:
+    the bounce's, the flight's after a null interface (``surface.flight_dim``)."""
     for j in range(PK):
         h = np.uint64(Q[Q_H * PK + j])
-        seg = Q[Q_SEG * PK + j]
-        for k in range(9):
-            S[(R_U + k) * PK + j] = rand_at(h, dim(seg, k))
+        b, nc = Q[Q_B * PK + j], Q[Q_J * PK + j]
+        for k in range(D_MED_T):
+            S[(R_U + k) * PK + j] = rand_at(h, dim(b, k))
+        for k in (D_MED_T, D_MED_CH):
+            S[(R_U + k) * PK + j] = rand_at(h, flight_dim(b, nc, k))
 
 
 @leaf
@@ -184,16 +189,21 @@ def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
     Q[Q_DELTA * PK + j] = 0
     alive, beta = roulette(beta, S[R_ETA * PK + j], depth, rr_depth, _u(S, j, D_RR))
     if alive:
-        _next_ray(S, Q, j, p, d2, beta)
+        _next_ray(S, Q, j, p, d2, beta, True)
 
 
 @leaf
-def _next_ray(S, Q, j, o, d, beta):
+def _next_ray(S, Q, j, o, d, beta, bounce):
+    """Lane j's next segment: after a vertex (``bounce``: the next random-number block) or a null
+    interface (the same flight goes on)."""
     _set3(S, R_O, j, o)
     _set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = math.inf
     _set3(S, R_BETA, j, beta)
     Q[Q_SEG * PK + j] += 1
+    if bounce:
+        Q[Q_B * PK + j] += 1
+        Q[Q_J * PK + j] = 0
     Q[Q_ALIVE * PK + j] = 1
 
 
@@ -214,7 +224,7 @@ def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     mat = sa.materials[sa.prim_info[prim, INFO_MAT]]
     if bsdf_is_null(mat):                   # index-matched interface: not a bounce, not a vertex
         Q[Q_MED * PK + j] = next_medium(sa.prim_info, prim, medium, d, ng)
-        _next_ray(S, Q, j, offset_origin(p, ng, d), d, beta)
+        _next_ray(S, Q, j, offset_origin(p, ng, d), d, beta, False)
         return
     depth = Q[Q_DEPTH * PK + j]
     if depth + 1 >= max_depth:
@@ -241,7 +251,7 @@ def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     Q[Q_DEPTH * PK + j] = depth + 1
     alive, beta = roulette(beta, eta, depth + 1, rr_depth, _u(S, j, D_RR))
     if alive:
-        _next_ray(S, Q, j, offset_origin(p, ng, d2), d2, beta)
+        _next_ray(S, Q, j, offset_origin(p, ng, d2), d2, beta, True)
 
 
 @leaf
@@ -259,6 +269,7 @@ def _shade(sa, S, Q, j, max_depth, rr_depth):
     if medium >= 0:
         sig, alb, g = medium_params(sa.media[medium])
         ts, scattered, w = sample_distance(sig, alb, t, _u(S, j, D_MED_CH), _u(S, j, D_MED_T))
+        Q[Q_J * PK + j] += 1                # the flight's next medium, if any, draws other numbers
         beta = _get3(S, R_BETA, j)
         _set3(S, R_BETA, j, (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]))
         if scattered:

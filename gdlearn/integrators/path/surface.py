@@ -13,7 +13,14 @@ Random numbers (the layout random-sequence replay depends on, book chapter "repl
 * dims 0, 1: the film position inside the pixel (drawn by the caller),
 * bounce b uses dims ``2 + b * DIMS_PER_BOUNCE + k`` with k =
   0 emitter choice, 1-2 emitter point, 3 BSDF lobe, 4-5 BSDF direction, 6 Russian roulette,
-  7 medium distance, 8 medium channel (volpath), 9 spare.
+  7 medium distance, 8 medium channel (volpath), 9 spare;
+* the flight leaving bounce b (volpath) samples its first medium with dims 7-8 of the block and,
+  after passing through j >= 1 media (null interfaces between them), the next one with
+  ``FLIGHT_DIMS0 + 2 (b FLIGHT_STRIDE + j - 1) + {0, 1}`` (:func:`flight_dim`), far above every
+  block. So no vertex's numbers depend on how many null interfaces the path crossed before it, and
+  an interface in vacuum changes no number at all: a replayed offset whose ray enters a medium's
+  boundary where the base's passes beside it still reads, at its next vertex, the numbers its own
+  path tracer would (``gpt_volume.mixed``).
 
 The radiance function receives the key *separately* from the film position, so an offset path can
 replay the base path's numbers at a neighbouring pixel.
@@ -42,6 +49,9 @@ from gdlearn.kernels.jit import block, inlined, leaf, noalloc
 
 DIMS_PER_BOUNCE = 10
 D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_CH = range(9)
+#: first dimension of a flight's media after its first, and the media one flight may pass through
+#: (volume.MAX_SEGMENTS bounds the count)
+FLIGHT_DIMS0, FLIGHT_STRIDE = 1 << 24, 1 << 12
 
 
 
@@ -49,6 +59,15 @@ D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_BSDF_U1, D_BSDF_U2, D_RR, D_MED_T, D_MED_C
 def dim(bounce, k):
     """The RNG dimension of quantity k at bounce b (see the module docstring)."""
     return 2 + bounce * DIMS_PER_BOUNCE + k
+
+
+@inlined
+def flight_dim(bounce, j, k):
+    """The RNG dimension of the medium quantity k (D_MED_T, D_MED_CH) of the flight leaving bounce b,
+    in the medium it enters after passing through j others (module docstring)."""
+    if j == 0:
+        return dim(bounce, k)
+    return FLIGHT_DIMS0 + 2 * (bounce * FLIGHT_STRIDE + j - 1) + (k - D_MED_T)
 
 
 @leaf

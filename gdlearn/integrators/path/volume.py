@@ -22,8 +22,10 @@ Rules taken from volpath (they change the image, so they follow Mitsuba exactly)
   new, pushed-off origin (a short ray would otherwise run past the SHADOW_EPS
   slack into the emitter's own surface and count as blocked).
 
-Random numbers: the layout of :mod:`gdlearn.integrators.path.surface`, indexed by the *segment* number
-(every loop iteration, null crossings included, takes a fresh block of ``DIMS_PER_BOUNCE``).
+Random numbers: the layout of :mod:`gdlearn.integrators.path.surface`, indexed by the bounce (real
+vertices: scattering events and non-null surfaces); a flight that passes through one medium into
+another draws the next distance from ``surface.flight_dim``'s own dimensions, so crossing one more
+null interface does not shift the numbers of any later vertex.
 
 Compiled without reference counting and with the next-event estimator inlined, for the reasons given
 in :mod:`gdlearn.integrators.path.surface`.
@@ -45,14 +47,15 @@ from gdlearn.kernels.media.phase import hg_eval, hg_sample
 from gdlearn.kernels.rng import path_state, rand_at
 from gdlearn.kernels.sampling import power_heuristic
 from gdlearn.kernels.scene_query import SHADOW_EPS
-from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH, D_MED_T, D_RR,
-                           _wanted, dim)
+from gdlearn.integrators.path.surface import (FLIGHT_STRIDE, D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
+                                              D_MED_T, D_RR, _wanted, dim, flight_dim)
 from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
 from gdlearn.kernels.jit import block, inlined, leaf, noalloc
 
 #: hard bound on segments per path (null interfaces do not count as bounces, so max_depth alone
 #: does not bound the loop)
 MAX_SEGMENTS = 4096
+assert MAX_SEGMENTS <= FLIGHT_STRIDE    # surface.flight_dim's media per flight
 
 
 @inlined
@@ -149,15 +152,15 @@ def _aim(o, q):
 
 
 @leaf
-def nee_volume(sa, p, ng, prim, medium, h, seg, stack):
+def nee_volume(sa, p, ng, prim, medium, h, bounce, stack):
     """Emitter sample from p with transmittance: (em, d, weight, pdf, is_delta) with weight =
     Le T / pdf (Mitsuba volpath's ``sample_emitter``); em = -1 when it carries nothing.
     ``prim`` is the surface p lies on (-1 for a medium vertex): the shadow ray starts in the medium
     on the side it leaves towards, as Mitsuba's ``si.target_medium(ds.d)``."""
     em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
-        rand_at(h, dim(seg, D_EM_SEL)), rand_at(h, dim(seg, D_EM_U1)),
-        rand_at(h, dim(seg, D_EM_U2)))
+        rand_at(h, dim(bounce, D_EM_SEL)), rand_at(h, dim(bounce, D_EM_U1)),
+        rand_at(h, dim(bounce, D_EM_U2)))
     if em < 0:
         return -1, dl, (0.0, 0.0, 0.0), 0.0, delta
     if prim >= 0:
@@ -189,13 +192,15 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
     prev_delta = True           # Mitsuba's count_direct: camera ray or a specular chain
     state = pc_init()
     depth = 0
-    for seg in range(MAX_SEGMENTS):
+    b, j = 0, 0                 # the bounce (random-number block) and the media its flight passed through
+    for _ in range(MAX_SEGMENTS):
         t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if medium >= 0:
             sig, alb, g = medium_params(sa.media[medium])
-            ts, scattered, w = sample_distance(sig, alb, t, rand_at(h, dim(seg, D_MED_CH)),
-                                               rand_at(h, dim(seg, D_MED_T)))
+            ts, scattered, w = sample_distance(sig, alb, t, rand_at(h, flight_dim(b, j, D_MED_CH)),
+                                               rand_at(h, flight_dim(b, j, D_MED_T)))
+            j += 1
             beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
             if scattered:
                 depth += 1
@@ -206,7 +211,7 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
                 state = pc_push(state, V_MEDIUM)
                 if _wanted(mask, state):
                     em, dl, wl, pdf_em, delta = nee_volume(sa, p, (0.0, 0.0, 0.0), -1, medium, h,
-                                                           seg, stack)
+                                                           b, stack)
                     if em >= 0:
                         ph = hg_eval(g, dot(wi, dl))
                         mw = 1.0 if delta else power_heuristic(pdf_em, ph)
@@ -214,17 +219,18 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
                         L = (L[0] + beta[0] * wl[0] * k, L[1] + beta[1] * wl[1] * k, L[2] + beta[2] * wl[2] * k)
                 if not pc_reachable(state, mask):
                     break
-                d, pdf = hg_sample(g, wi, rand_at(h, dim(seg, D_BSDF_U1)),
-                                   rand_at(h, dim(seg, D_BSDF_U2)))
+                d, pdf = hg_sample(g, wi, rand_at(h, dim(b, D_BSDF_U1)),
+                                   rand_at(h, dim(b, D_BSDF_U2)))
                 if not pdf > 0.0:
                     break
                 o = p
                 prev_p = p
                 prev_pdf = pdf
                 prev_delta = False
-                alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(seg, D_RR)))
+                alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(b, D_RR)))
                 if not alive:
                     break
+                b, j = b + 1, 0
                 continue
         if prim < 0:
             if sa.env >= 0 and _wanted(mask, state):
@@ -252,7 +258,7 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
         want_coat = _wanted(mask, pc_push(state, c_coat))
         want_rest = _wanted(mask, pc_push(state, c_rest))
         if not bsdf_is_delta_only(mat) and (want_coat or want_rest):
-            em2, dl, wl, pdf_em, delta = nee_volume(sa, p, ng, prim, medium, h, seg, stack)
+            em2, dl, wl, pdf_em, delta = nee_volume(sa, p, ng, prim, medium, h, b, stack)
             if em2 >= 0:
                 wo = to_local(dl, s, tt, ns)
                 f = bsdf_eval(mat, wi, wo)
@@ -260,9 +266,9 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
                 k *= nee_class_share(mat, wi, wo, want_coat, want_rest)   # a rough plastic's split
                 L = (L[0] + beta[0] * f[0] * wl[0] * k, L[1] + beta[1] * f[1] * wl[1] * k,
                      L[2] + beta[2] * f[2] * wl[2] * k)
-        u_lobe = rand_at(h, dim(seg, D_LOBE))
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, dim(seg, D_BSDF_U1)),
-                                               rand_at(h, dim(seg, D_BSDF_U2)))
+        u_lobe = rand_at(h, dim(b, D_LOBE))
+        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, rand_at(h, dim(b, D_BSDF_U1)),
+                                               rand_at(h, dim(b, D_BSDF_U2)))
         if not pdf > 0.0:
             break
         beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
@@ -277,9 +283,10 @@ def radiance_volpath_inline(sa, o, d, tmax, seed, key, sample, max_depth, rr_dep
         prev_pdf = pdf
         prev_delta = is_delta
         depth += 1
-        alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(seg, D_RR)))
+        alive, beta = roulette(beta, eta, depth, rr_depth, rand_at(h, dim(b, D_RR)))
         if not alive:
             break
+        b, j = b + 1, 0
     return L
 
 

@@ -38,7 +38,7 @@ from gdlearn.kernels.geometry import INFO_MAT, offset_origin, surface
 from gdlearn.kernels.media.medium import medium_params, sample_distance
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.scene_query import SHADOW_EPS
-from gdlearn.integrators.path.surface import D_MED_CH, D_MED_T, dim
+from gdlearn.integrators.path.surface import D_MED_CH, D_MED_T, flight_dim
 from gdlearn.integrators.path.volume import MAX_SEGMENTS, next_medium
 from gdlearn.shifts.distance import lands_on_segment
 from gdlearn.kernels.jit import leaf, noalloc
@@ -200,11 +200,12 @@ def segment_to(sa, p, ng, q, medium, collide, stack):
 # inlined (leaf): as a call of its own it took the scene as ~100 scalars once per base segment, and
 # gpt's passes in media were 20-30 % slower (benchmarks/README.md, issue 20 session 16)
 @leaf
-def base_flight(sa, o, d, tmax, medium, beta, rng, seg, stack, need_lp):
+def base_flight(sa, o, d, tmax, medium, beta, rng, bounce, stack, need_lp):
     """volpath's loop from (o, d) up to its next real event, null interfaces crossed, same random
-    numbers (``rng``: :class:`~gdlearn.integrators.path.params.PathRng`) and the same beta updates. Returns ``(ev, seg, medium, beta, W, log p, tau, prim, p, ng,
-    ns)``: W the product of the flight's weights, log p its density (pass probabilities and the
-    collision pdf, spectral MIS), tau the total distance, seg the segment the event belongs to.
+    numbers (``rng``: :class:`~gdlearn.integrators.path.params.PathRng`; the flight leaving bounce
+    ``bounce``, ``surface.flight_dim``) and the same beta updates. Returns ``(ev, medium, beta, W,
+    log p, tau, prim, p, ng, ns)``: W the product of the flight's weights, log p its density (pass
+    probabilities and the collision pdf, spectral MIS), tau the total distance.
     ``need_lp`` False: log p is not computed (returned as 0): only a free offset's shift reads it, and
     its logs and exponentials (up to 7 per flight) cost a grey medium's flight more than volpath's
     whole sampling, which needs none."""
@@ -212,29 +213,32 @@ def base_flight(sa, o, d, tmax, medium, beta, rng, seg, stack, need_lp):
     W = ONE3
     lp = 0.0
     tau = 0.0
-    while seg < MAX_SEGMENTS:
+    j = 0                                    # media passed through
+    n = 0                                    # segments
+    while n < MAX_SEGMENTS:
         t, prim, u, v = closest_hit_inline(sa.nodes, sa.node_info, sa.prims, sa.prim_info, o, d, 0.0, tmax, stack)
         tmax = math.inf
         if medium >= 0:
             sig, alb, _ = medium_params(sa.media[medium])
-            ts, scattered, w = sample_distance(sig, alb, t, rand(seed, key, s, dim(seg, D_MED_CH)),
-                                               rand(seed, key, s, dim(seg, D_MED_T)))
+            ts, scattered, w = sample_distance(sig, alb, t, rand(seed, key, s, flight_dim(bounce, j, D_MED_CH)),
+                                               rand(seed, key, s, flight_dim(bounce, j, D_MED_T)))
+            j += 1
             beta = (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2])
             W = (W[0] * w[0], W[1] * w[1], W[2] * w[2])
             if scattered:
                 p = (o[0] + ts * d[0], o[1] + ts * d[1], o[2] + ts * d[2])
                 if need_lp:
                     lp += log_distance_pdf(sig, ts)
-                return EV_SCATTER, seg, medium, beta, W, lp, tau + ts, -1, p, ZERO3, ZERO3
+                return EV_SCATTER, medium, beta, W, lp, tau + ts, -1, p, ZERO3, ZERO3
             if need_lp:
                 lp += log_pass_probability(sig, t)
         if prim < 0:
-            return EV_ESCAPE, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
+            return EV_ESCAPE, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
         p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, u, v)
         if not bsdf_is_null(sa.materials[sa.prim_info[prim, INFO_MAT]]):
-            return EV_SURFACE, seg, medium, beta, W, lp, tau + t, prim, p, ng, ns
+            return EV_SURFACE, medium, beta, W, lp, tau + t, prim, p, ng, ns
         medium = next_medium(sa.prim_info, prim, medium, d, ng)
         o = offset_origin(p, ng, d)
         tau += t
-        seg += 1
-    return EV_FAIL, seg, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3
+        n += 1
+    return EV_FAIL, medium, beta, W, lp, tau, -1, o, ZERO3, ZERO3

@@ -52,10 +52,9 @@ from gdlearn.kernels.pathclass import pc_init, pc_push
 from gdlearn.kernels.media.phase import hg_eval, hg_sample
 from gdlearn.kernels.rng import rand
 from gdlearn.kernels.sampling import power_heuristic
-from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
-                                          D_MED_T, D_RR, dim)
+from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, dot, max3, to_local, to_world
-from gdlearn.integrators.path.volume import next_medium, shadow_transmittance
+from gdlearn.integrators.path.volume import MAX_SEGMENTS, next_medium, shadow_transmittance
 from gdlearn.kernels.arrays import borrowed
 from gdlearn.shifts.policy import SHIFT_FAIL, SHIFT_RECONNECT, is_mixed, record
 from gdlearn.integrators.path.gpt_surface.mixed import unpaired
@@ -138,12 +137,12 @@ def _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
 
 
 @ir_inline
-def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, stack):
+def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, bounce, rng, stats, stack):
     """Every live offset follows the base's segment x_i -> x_{i+1} (its event ``nx.ev`` at ``nx.p``).
     ``bv``: the base vertex x_i the segment leaves, ``nx`` the vertex x_{i+1} it reached
     (:class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``; ``bv.cls_b`` its lobe's effect
     class, ``bv.cls_s`` its class for the shift decisions); the base flight (weight W, log density lp_b,
-    length tau) read the random numbers (``rng``) of segments seg0 .. seg_b."""
+    length tau) read the random numbers (``rng``) of the flight leaving bounce ``bounce``."""
     ev = nx.ev
     kind = K_SURFACE if ev == EV_SURFACE else (K_MEDIUM if ev == EV_SCATTER else K_ESCAPED)
     for k in range(4):
@@ -158,7 +157,7 @@ def _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg_b, rng, stats, s
                 set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
                 set_vertex(sa, of, oi, k, kind, nx.prim, nx.p, nx.ng, nx.ns, nx.d, nx.med)
         elif is_mixed(cfg.policy):
-            if not shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, stack):
+            if not shift_free_mixed(sa, of, oi, k, cfg, bv, nx, bounce, rng, lp_b, stats, stack):
                 oi[k, I_ALIVE] = FAILED
         elif not _shift_free(sa, of, oi, k, cfg, bv, nx, tau, lp_b, stats, stack):
             oi[k, I_ALIVE] = FAILED
@@ -199,7 +198,7 @@ def _emission(sa, nx, beta, prev_p, prev_pdf, prev_delta, state, of, oi, diff, s
 
 # inlined (leaf), as flight.base_flight: one call per base vertex that passed the whole scene
 @leaf
-def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, stack):
+def _next_event(sa, nx, mat, g, beta, state, rng, bounce, of, oi, diff, summ, cfg, stack):
     """volpath's next-event sample at the base vertex ``nx`` -- the vertex the last flight reached, a
     medium vertex when ``nx.ev`` is EV_SCATTER (``nee_volume``'s random numbers and arithmetic) -- and its
     shifts to the offsets (:func:`gpt_volume_vertex.nee_pairs`); returns the base term."""
@@ -209,10 +208,10 @@ def _next_event(sa, nx, mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, 
     n_em = sa.emitters.shape[0]
     if n_em == 0:
         return ZERO3
-    u_sel = rand(seed, key, s, dim(seg, D_EM_SEL))
+    u_sel = rand(seed, key, s, dim(bounce, D_EM_SEL))
     em_b, q, nq, dl, _, w_em, pdf_em, _, delta = sample_emitter(
         sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p, u_sel,
-        rand(seed, key, s, dim(seg, D_EM_U1)), rand(seed, key, s, dim(seg, D_EM_U2)))
+        rand(seed, key, s, dim(bounce, D_EM_U1)), rand(seed, key, s, dim(bounce, D_EM_U2)))
     em = min(int(u_sel * n_em), n_em - 1)        # even if black for the base: an offset may see it
     nb = ZERO3
     cbv = ZERO3
@@ -286,15 +285,14 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
     o, d, tmax = camera_ray(sa.camera, px.fx, px.fy)
     start_offsets(sa, px, of, oi)
     medium = sa.camera_medium
-    beta, eta, state, L, depth, seg = ONE3, 1.0, pc_init(), ZERO3, 0, 0
+    beta, eta, state, L, depth, b = ONE3, 1.0, pc_init(), ZERO3, 0, 0     # b: bounce (random numbers)
     prev_p, prev_pdf, prev_delta = o, 1.0, True
     # the base vertex the next segment leaves, as the shifts need it (_shift_all)
     bv = BaseVertex(VB_CAMERA, o, ZERO3, ZERO3, -1, medium, sa.materials[0], ZERO3, ZERO3, ZERO3, ONE3, 1.0, False,
                     0, 0, (0.0, 0.0, 0.0))
-    while True:
-        seg0 = seg
-        ev, seg, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, rng, seg,
-                                                                           stack, _any_free(oi))
+    while b < MAX_SEGMENTS:
+        ev, medium, beta, W, lp_b, tau, prim, p, ng, ns = base_flight(sa, o, d, tmax, medium, beta, rng, b, stack,
+                                                                      _any_free(oi))
         tmax = math.inf
         if ev == EV_FAIL:
             break
@@ -303,18 +301,18 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
         cls_next = V_MEDIUM if ev == EV_SCATTER else vclass_of(sa, ev == EV_ESCAPE, prim, cfg)
         delta_next = ev == EV_SURFACE and bsdf_is_delta_only(sa.materials[sa.prim_info[prim, INFO_MAT]])
         nx = NextVertex(ev != EV_ESCAPE, ev, prim, p, ng, ns, d, medium, cls_next, delta_next)
-        _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, seg0, seg, rng, stats, stack)
+        _shift_all(sa, of, oi, cfg, bv, nx, tau, lp_b, W, b, rng, stats, stack)
         wi_w = (-d[0], -d[1], -d[2])
-        u_lobe = rand(seed, key, s, dim(seg, D_LOBE))    # also at a medium vertex: a replayed offset may need it
+        u_lobe = rand(seed, key, s, dim(b, D_LOBE))    # also at a medium vertex: a replayed offset may need it
         if ev == EV_SCATTER:
             depth += 1
             if depth >= cfg.max_depth:
                 break
             state = pc_push(state, V_MEDIUM)
             _, _, g = medium_params(sa.media[medium])
-            cb = _next_event(sa, nx, bv.mat, g, beta, state, rng, seg, of, oi, diff, summ, cfg, stack)
+            cb = _next_event(sa, nx, bv.mat, g, beta, state, rng, b, of, oi, diff, summ, cfg, stack)
             L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-            u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
+            u1, u2 = rand(seed, key, s, dim(b, D_BSDF_U1)), rand(seed, key, s, dim(b, D_BSDF_U2))
             d2, pdf = hg_sample(g, wi_w, u1, u2)
             if not pdf > 0.0:
                 break
@@ -331,9 +329,9 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
             sf, tf = coordinate_system(ns)
             wi = to_local(wi_w, sf, tf, ns)
             if not bsdf_is_delta_only(mat):
-                cb = _next_event(sa, nx, mat, 0.0, beta, state, rng, seg, of, oi, diff, summ, cfg, stack)
+                cb = _next_event(sa, nx, mat, 0.0, beta, state, rng, b, of, oi, diff, summ, cfg, stack)
                 L = (L[0] + cb[0], L[1] + cb[1], L[2] + cb[2])
-            u1, u2 = rand(seed, key, s, dim(seg, D_BSDF_U1)), rand(seed, key, s, dim(seg, D_BSDF_U2))
+            u1, u2 = rand(seed, key, s, dim(b, D_BSDF_U1)), rand(seed, key, s, dim(b, D_BSDF_U2))
             wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u_lobe, u1, u2)
             if not pdf > 0.0:
                 break
@@ -351,10 +349,10 @@ def gpt_volume_sample(sa, px, rng, cfg, of, oi, diff, summ, stats, stack):
             prev_p, prev_pdf, prev_delta = p, pdf, is_delta
             depth += 1
             d = d2
-        alive, beta = _roulette_all(of, oi, beta, eta, depth, cfg, rand(seed, key, s, dim(seg, D_RR)))
+        alive, beta = _roulette_all(of, oi, beta, eta, depth, cfg, rand(seed, key, s, dim(b, D_RR)))
         if not alive:
             break
-        seg += 1
+        b += 1
     return L
 
 

@@ -13,8 +13,12 @@ ray is long enough. Replayed flights are primary-sample-space identities: beta' 
 offset's own flight (transmittances, collision or pass densities, spectral MIS) and the Eq. 17 log
 ratio is unchanged, exactly as for a replayed direction (Eq. 6). Phase sampling at a medium vertex
 is replayed; a medium vertex is connectable, so a scattering offset reconnects to a connectable base
-vertex and vice versa. A flight that crosses a different number of null interfaces than the base's
-would read other random numbers in the next steps: that pair fails (a symmetric rule).
+vertex and vice versa. A replayed flight may cross more or fewer null interfaces than the base's
+(one ray enters a medium's boundary, its neighbour passes beside it): the random numbers of the
+flights after null interfaces have their own dimensions (``surface.flight_dim``), so the offset
+still reads, at its next vertex, the numbers its own path tracer would read there, and the shift
+stays the identity in primary sample space. (Numbering them as segments instead made 11 % of the
+replays on the medium cube fail and doubled its gradients' error; benchmarks/README.md, issue 20.)
 
 Reversibility: as on surfaces, a step that did not reconnect fails when the backward shift would
 reconnect the base vertex to the offset's new vertex y_{b+1} (:func:`inverse_reconnects_volume`:
@@ -45,14 +49,14 @@ ONE3 = (1.0, 1.0, 1.0)
 
 
 @noalloc
-def replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack):
-    """volpath's flight along offset k's ray with the base's random numbers of segment seg0 on (module
-    docstring). False if it ends in no event or after another number of null interfaces than the
-    base's flight (which ended at segment seg_b)."""
+def replay_flight(sa, of, oi, k, bounce, rng, cfg, stack):
+    """volpath's flight along offset k's ray with the base's random numbers of the flight leaving
+    ``bounce`` (module docstring). False if it ends in no event (more than ``MAX_SEGMENTS`` null
+    interfaces)."""
     d = get3(of, k, F_D)
-    ev, seg, med, _, W, _, _, prim, p, ng, ns = base_flight(sa, get3(of, k, F_O), d, of[k, F_TMAX], oi[k, I_MED],
-                                                            ONE3, rng, seg0, stack, False)   # log p unused
-    if ev == EV_FAIL or seg != seg_b:
+    ev, med, _, W, _, _, prim, p, ng, ns = base_flight(sa, get3(of, k, F_O), d, of[k, F_TMAX], oi[k, I_MED],
+                                                       ONE3, rng, bounce, stack, False)   # log p unused
+    if ev == EV_FAIL:
         return False
     if cfg.broken != BROKEN_REPLAY_WEIGHT:
         set3(of, k, F_BETA, mul3(get3(of, k, F_BETA), W))
@@ -103,7 +107,7 @@ def _continue(sa, of, oi, k, action, medium_o, mat_o, bv, nx, cfg, stack):
 
 # inlined: see gpt_volume.vertex.pair
 @leaf
-def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, stack):
+def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, bounce, rng, lp_b, stats, stack):
     """Shift a not yet reconnected offset along the base's segment x_b -> x_{b+1} by a mixed policy
     (``bv``, ``nx``: :class:`~gdlearn.integrators.path.params.BaseVertex`, ``NextVertex``). Returns False
     when the offset fails or its path ends (the caller marks it: later base techniques are unpaired).
@@ -111,7 +115,7 @@ def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, 
     vb_medium, mat_b, cls_s = bv.kind == VB_MEDIUM, bv.mat, bv.cls_s
     cls_next = nx.cls
     if bv.kind == VB_CAMERA:               # the pixel shift set the ray: replay the first flight
-        ok = replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack)
+        ok = replay_flight(sa, of, oi, k, bounce, rng, cfg, stack)
         if not ok:
             record(stats, SHIFT_REPLAY, False)
         return ok
@@ -134,7 +138,7 @@ def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, seg0, seg_b, rng, lp_b, stats, 
     if not ok:                             # replay: the neighbour's tracer stops too; a copy failed
         record(stats, action, action == SHIFT_REPLAY)
         return False
-    ok = replay_flight(sa, of, oi, k, seg0, seg_b, rng, cfg, stack)
+    ok = replay_flight(sa, of, oi, k, bounce, rng, cfg, stack)
     if ok and cfg.broken != BROKEN_REVERSIBILITY:
         cls_x = V_MEDIUM if vb_medium else vertex_class(mat_b, cfg.threshold)
         ok = not inverse_reconnects_volume(sa, oi, of, k, lcls, p_o, bv, cls_x, cfg, stack) and \
