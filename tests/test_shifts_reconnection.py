@@ -11,7 +11,7 @@ from test_shifts_geometry import Plane, Sphere, direction_chart, fd_jacobian, tr
 
 from gdlearn.kernels import layout as L  # noqa: E402
 from gdlearn.shifts.path import jacobian_solid_angle_to_area  # noqa: E402
-from gdlearn.shifts.reconnection import (can_reconnect, reconnect,  # noqa: E402
+from gdlearn.shifts.reconnection import (MIN_DISTANCE_RATIO, can_reconnect, far_enough, reconnect,  # noqa: E402
                                          reconnection_jacobian_solid_angle)
 
 T = tuple
@@ -123,3 +123,30 @@ def test_failures_are_flags_not_exceptions():
     # non-finite input: no exception, failure flag
     *_, ok = reconnect((0.0, 0.0, 1.0), (np.inf, 0.0, 0.0), y, n)
     assert not ok
+
+
+def test_short_segment_guard_is_symmetric_and_bounds_the_distance_ratio():
+    """far_enough reads x_b and x'_b alike (the backward shift decides the same), admits exactly the
+    y whose two segments are >= c |x_b - x'_b| (checked against a direct numpy evaluation), and on
+    those the Jacobian's distance ratio stays in [(c/(c+1))^2, ((c+1)/c)^2]; without the guard the
+    same draws reach ratios far outside it."""
+    rng = np.random.default_rng(11)
+    c = MIN_DISTANCE_RATIO
+    lo, hi = (c / (c + 1)) ** 2, ((c + 1) / c) ** 2
+    ratios, admitted = [], 0
+    for _ in range(4000):
+        xb = rng.normal(size=3)
+        xo = xb + rng.normal(size=3) * 0.05
+        y = xb + rng.normal(size=3) * rng.choice([0.02, 0.1, 1.0])
+        ok = far_enough(tuple(xb), tuple(xo), tuple(y))
+        assert ok == far_enough(tuple(xo), tuple(xb), tuple(y))
+        delta = np.linalg.norm(xb - xo)
+        db, do = np.linalg.norm(y - xb), np.linalg.norm(y - xo)
+        assert ok == (db >= c * delta and do >= c * delta)
+        r = db ** 2 / do ** 2
+        ratios.append(r)
+        if ok:
+            admitted += 1
+            assert lo * (1 - 1e-12) <= r <= hi * (1 + 1e-12), (r, lo, hi)
+    assert 500 < admitted < 3500          # both outcomes are exercised
+    assert max(ratios) > 10 * hi and min(ratios) < lo / 10

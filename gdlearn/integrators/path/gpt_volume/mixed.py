@@ -17,13 +17,17 @@ vertex and vice versa. A replayed flight may cross more or fewer null interfaces
 (one ray enters a medium's boundary, its neighbour passes beside it): the random numbers of the
 flights after null interfaces have their own dimensions (``surface.flight_dim``), so the offset
 still reads, at its next vertex, the numbers its own path tracer would read there, and the shift
-stays the identity in primary sample space. (Numbering them as segments instead made 11 % of the
-replays on the medium cube fail and doubled its gradients' error; benchmarks/README.md, issue 20.)
+stays the identity in primary sample space. (Numbered by segments instead, 11 % of the replays on
+the medium cube had to fail; benchmarks/README.md, issue 20.)
+
+Short segments: a reconnection also needs both segments to x_{b+1} at least twice as long as the
+distance between x_b and x'_b (``reconnection.far_enough``): it bounds the distance ratio of the
+Jacobian, which a dense medium's short flights otherwise swing by factors of 10; such a step replays.
 
 Reversibility: as on surfaces, a step that did not reconnect fails when the backward shift would
 reconnect the base vertex to the offset's new vertex y_{b+1} (:func:`inverse_reconnects_volume`:
-connectable classes, not grazing, the segment x_b -> y_{b+1} free of non-null surfaces and arriving
-in y_{b+1}'s medium).
+connectable classes, segments long enough, not grazing, the segment x_b -> y_{b+1} free of non-null
+surfaces and arriving in y_{b+1}'s medium).
 """
 
 
@@ -41,7 +45,7 @@ from gdlearn.kernels.layout import V_MEDIUM
 from gdlearn.kernels.pathclass import pc_push
 from gdlearn.integrators.path.volume import next_medium
 from gdlearn.shifts.policy import SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY, mixed_action, mixed_decide, record
-from gdlearn.shifts.reconnection import reconnect
+from gdlearn.shifts.reconnection import far_enough, reconnect
 from gdlearn.kernels.jit import leaf, noalloc
 from gdlearn.integrators.path.params import VB_CAMERA, VB_MEDIUM
 
@@ -78,6 +82,8 @@ def inverse_reconnects_volume(sa, oi, of, k, lobe_y, y_b, bv, cls_x, cfg, stack)
     if kind == K_SURFACE and not conn(vertex_class(sa.materials[oi[k, I_MAT]], cfg.threshold)):
         return False
     y2 = get3(of, k, F_POS)
+    if not far_enough(y_b, x_b, y2):
+        return False
     w, _, _, _, ok = reconnect(y_b, x_b, y2, get3(of, k, F_NG))
     if not ok:
         return False
@@ -127,7 +133,7 @@ def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, bounce, rng, lp_b, stats, stack
     cb, co = conn(cls_s), conn(cls_o)
     p_o = get3(of, k, F_POS)
     # C(x_b, x'_b, x_{b+1}) (the table, shifts.policy.mixed_decide); blocked or grazing: continue instead
-    if mixed_decide(cfg.policy, cls_s, cls_o, cls_next) == SHIFT_RECONNECT:
+    if mixed_decide(cfg.policy, cls_s, cls_o, cls_next) == SHIFT_RECONNECT and far_enough(bv.x, p_o, nx.p):
         ok, pdf_o = reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack)
         if ok:
             record(stats, SHIFT_RECONNECT, True)
