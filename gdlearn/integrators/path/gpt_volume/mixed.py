@@ -132,7 +132,8 @@ def shift_free_mixed(sa, of, oi, k, cfg, bv, nx, bounce, rng, lp_b, stats, stack
     cls_o = V_MEDIUM if medium_o else vertex_class(mat_o, cfg.threshold)
     cb, co = conn(cls_s), conn(cls_o)
     p_o = get3(of, k, F_POS)
-    # C(x_b, x'_b, x_{b+1}) (the table, shifts.policy.mixed_decide); blocked or grazing: continue instead
+    # C(x_b, x'_b, x_{b+1}) (the table, shifts.policy.mixed_decide) and segments long enough
+    # (reconnection.far_enough); too short, blocked or grazing: continue instead
     if mixed_decide(cfg.policy, cls_s, cls_o, cls_next) == SHIFT_RECONNECT and far_enough(bv.x, p_o, nx.p):
         ok, pdf_o = reconnect_offset(sa, of, oi, k, bv, nx, lp_b, cfg, stack)
         if ok:
