@@ -25,11 +25,12 @@ the path, and the inverse shift, which sees only the path, could not repeat it.
 Reversibility (STAR Sec. 3.5, Fig. 4). Eq. 17's weights of a forward shift T and of the backward
 shift of the same pair sum to one only if the backward shift, run from the offset path y = T(x)
 towards the base pixel, makes the same decision at every vertex and so returns x. Reconnection is
-symmetric: the criterion "x_b, x'_b and the next vertex connectable, and the segment to it free" reads
-the same from y, whose next vertex *is* x_{b+1}. Any other action leaves the offset at a vertex
-y_{b+1} of its own, and the backward shift then asks the criterion about x_b, y_b and y_{b+1}: if it
-holds there, the backward shift would reconnect x_b to y_{b+1} instead of returning x, so the forward
-shift must be declared failed. The kernels run that check after every non-reconnecting step
+symmetric: the criterion "x_b, x'_b and the next vertex connectable, the segments to it long enough
+(``reconnection.far_enough``, in the mixed kernels) and the one from x'_b free" reads the same from
+y, whose next vertex *is* x_{b+1}. Any other action leaves the offset at a vertex y_{b+1} of its own,
+and the backward shift then asks the criterion about x_b, y_b and y_{b+1}: if it holds there, the
+backward shift would reconnect x_b to y_{b+1} instead of returning x, so the forward shift must be
+declared failed. The kernels run that check after every non-reconnecting step
 (:func:`gdlearn.integrators.path.gpt_surface.mixed.inverse_reconnects`; Kettunen et al.'s policies use the stronger
 rule "the next vertices agree in class", which implies it).
 

@@ -23,14 +23,18 @@ almost surely has zero BSDF. Visibility of the new segment x'_b -> y is the call
 Short segments (gdlearn's guard, not the STAR's; :func:`far_enough`). The distance ratio
 |x_b - y|^2 / |x'_b - y|^2 is unbounded when y lies close to x_b or x'_b compared with the shift's
 own displacement delta = |x_b - x'_b|: in a dense medium (mean free path 0.4 in the medium cube,
-a pixel's footprint 0.01-0.05) the next scattering vertex is often that close, and the offset's
-contribution then swings by factors of 10 around the base's. Requiring both |x_b - y| and
+a pixel's footprint 0.01-0.05) the next scattering vertex is often that close, and on surfaces the
+next vertex is where a box meets the floor or a wall meets the ceiling; the offset's contribution
+then swings by factors of 10 around the base's. Requiring both |x_b - y| and
 |x'_b - y| >= c delta bounds the ratio: each length is within delta of the other, so
 
     (c / (c + 1))^2  <=  |x_b - y|^2 / |x'_b - y|^2  <=  ((c + 1) / c)^2,
 
 [0.44, 2.25] for c = 2 (:data:`MIN_DISTANCE_RATIO`). The rule reads x_b and x'_b alike, so the
-backward shift makes the same decision; a step that does not reconnect replays instead.
+backward shift makes the same decision; a step that does not reconnect replays instead. Both mixed
+kernels apply it, forward and in their reversibility checks (``gpt_surface.mixed``,
+``gpt_volume.mixed``); Kettunen et al.'s ``halfvector+reconnection``, which has no replay to fall
+back on, keeps its published rule.
 """
 import math
 

@@ -6,8 +6,10 @@ loop that calls :func:`shift_segment_mixed` is :mod:`gdlearn.integrators.path.gp
 
 The shift. At each vertex x_b of the base path, with the offset at x'_b: reconnect x'_b to x_{b+1}
 when the criterion C(x_b, x'_b, x_{b+1}) holds -- both vertices connectable (the base's by the lobe of
-its sampled direction), x_{b+1} a connectable surface vertex, the segment x'_b -> x_{b+1} free and not
-grazing (:func:`gdlearn.shifts.reconnection.reconnect`). Otherwise the offset *continues*: it replays
+its sampled direction), x_{b+1} a connectable surface vertex, both segments x_b -> x_{b+1} and x'_b -> x_{b+1} at least
+twice the distance between x_b and x'_b (:func:`gdlearn.shifts.reconnection.far_enough`: it bounds
+the Jacobian's distance ratio to [0.44, 2.25]), the segment x'_b -> x_{b+1} free and not grazing
+(:func:`gdlearn.shifts.reconnection.reconnect`). Otherwise the offset *continues*: it replays
 the base's random numbers through its own BSDF (Sec. 3.1) -- or, under the half-vector policy, copies
 the half vector where both vertices are glossy / specular (Sec. 3.2) -- whatever the two vertices'
 classes. A class mismatch is therefore not a failure: replay is the identity in primary sample space.
@@ -57,7 +59,7 @@ from gdlearn.kernels.pathclass import pc_push
 from gdlearn.kernels.scene_query import intersect, occluded
 from gdlearn.kernels.vec import coordinate_system, to_local, to_world
 from gdlearn.shifts.policy import SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY, mixed_action, mixed_decide, record
-from gdlearn.shifts.reconnection import reconnect
+from gdlearn.shifts.reconnection import far_enough, reconnect
 from gdlearn.kernels.jit import ir_inline, leaf
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -84,11 +86,14 @@ def replay_direction(sa, k, of, mat_o, u_lobe, u1, u2, cfg):
 def inverse_reconnects(sa, lobe_y, cls_x, y_b, x_b, ng_x, hit_y2, prim_y2, y2, ng_y2, cfg, stack):
     """Would the backward shift -- base y (the offset), offset x (the base) -- reconnect x_b to y's next
     vertex y2? C(y_b, x_b, y2) of the module docstring: y's direction at y_b of a connectable lobe
-    (``lobe_y``), x_b's material connectable (``cls_x``), y2 a connectable surface vertex, the segment
-    x_b -> y2 not degenerate, not grazing y2 and not blocked."""
+    (``lobe_y``), x_b's material connectable (``cls_x``), y2 a connectable surface vertex, both
+    segments to y2 long enough (``far_enough``), the segment x_b -> y2 not degenerate, not grazing y2
+    and not blocked."""
     if not (hit_y2 and conn(lobe_y) and conn(cls_x)):
         return False
     if not conn(vclass_of(sa, False, prim_y2, cfg)):
+        return False
+    if not far_enough(y_b, x_b, y2):
         return False
     _, _, _, _, ok = reconnect(y_b, x_b, y2, ng_y2)
     return ok and not occluded(sa, x_b, ng_x, y2, stack)
@@ -125,9 +130,10 @@ def shift_segment_mixed(sa, k, of, oi, cfg, bv, nx, stats, stack):
     cb, co = conn(cls_b), conn(cls_o)
     p_o = get3(of, k, F_POS)
     ng_o = get3(of, k, F_NG)
-    if mixed_decide(cfg.policy, cls_b, cls_o, vclass_of(sa, not hit2, prim2, cfg)) == SHIFT_RECONNECT:
-        # C(x_b, x'_b, x_{b+1}); shift_direction tests the segment (blocked or grazing: continue instead,
-        # and the backward shift's criterion fails alike)
+    if mixed_decide(cfg.policy, cls_b, cls_o, vclass_of(sa, not hit2, prim2, cfg)) == SHIFT_RECONNECT and \
+            far_enough(p, p_o, p2):
+        # C(x_b, x'_b, x_{b+1}) with segments long enough; shift_direction tests the segment (blocked or
+        # grazing: continue instead, and the backward shift's criterion fails alike)
         wo_w, ok, lcls, pdf_o, delta_o = shift_direction(sa, SHIFT_RECONNECT, k, of, mat_o, bv, nx, cfg, stack)
         if ok:
             kept, ecls = relabel(of, k, mat_o, bv, wo_w, lcls, cfg)
