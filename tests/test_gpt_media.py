@@ -116,10 +116,13 @@ def test_mis_weight_one_on_both_sides_fails_the_same_test(policy):
     variants (gpt_shift.BROKEN_UNPAIRED, BROKEN_REPLAY_WEIGHT, BROKEN_REVERSIBILITY) are too weak
     on the fog box to be seen at this budget (measured max block |t| 2.5, 2.5, 2.7 against 5.15):
     they act where flight kinds differ or on the first, grey flight (whose error is a rescaled
-    gradient); tests/test_gpt.py and tests/test_gpt_reversibility.py catch them on surfaces. So is
-    a short-segment guard (``reconnection.far_enough``) applied by the forward shift only: on the
+    gradient); tests/test_gpt.py and tests/test_gpt_reversibility.py catch them on surfaces, and
+    tests/test_gpt_volume_reversibility.py catches BROKEN_REVERSIBILITY in media. So is a
+    short-segment guard (``reconnection.far_enough``) applied by the forward shift only: on the
     medium cube, where it acts most, max block |t| 2.1 against 5.15 and projections 0.6 against 4.03
-    (measured once, then removed); tests/test_shifts_reconnection.py checks the guard's symmetry."""
+    (measured once, then removed); tests/test_shifts_reconnection.py checks the guard's symmetry,
+    and tests/test_gpt_volume_reversibility.py catches the other one-sided guard (in the check, not
+    in the decision)."""
     dx, dy = differences(*_runs(_scene(), policy, broken=BROKEN_MIS))
     px, py, pxy, kp = projected_t(dx, dy)
     assert max(px, py, pxy) > kp, f"the test cannot see doubled gradients: |t| {px:.2f} {py:.2f} {pxy:.2f}"

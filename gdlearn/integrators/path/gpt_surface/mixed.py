@@ -6,9 +6,10 @@ loop that calls :func:`shift_segment_mixed` is :mod:`gdlearn.integrators.path.gp
 
 The shift. At each vertex x_b of the base path, with the offset at x'_b: reconnect x'_b to x_{b+1}
 when the criterion C(x_b, x'_b, x_{b+1}) holds -- both vertices connectable (the base's by the lobe of
-its sampled direction), x_{b+1} a connectable surface vertex, both segments x_b -> x_{b+1} and x'_b -> x_{b+1} at least
-twice the distance between x_b and x'_b (:func:`gdlearn.shifts.reconnection.far_enough`: it bounds
-the Jacobian's distance ratio to [0.44, 2.25]), the segment x'_b -> x_{b+1} free and not grazing
+its sampled direction), x_{b+1} a connectable surface vertex, both segments x_b -> x_{b+1} and
+x'_b -> x_{b+1} at least twice the distance between x_b and x'_b
+(:func:`gdlearn.shifts.reconnection.far_enough`: it bounds the Jacobian's distance ratio to
+[0.44, 2.25]), the segment x'_b -> x_{b+1} free and not grazing
 (:func:`gdlearn.shifts.reconnection.reconnect`). Otherwise the offset *continues*: it replays
 the base's random numbers through its own BSDF (Sec. 3.1) -- or, under the half-vector policy, copies
 the half vector where both vertices are glossy / specular (Sec. 3.2) -- whatever the two vertices'

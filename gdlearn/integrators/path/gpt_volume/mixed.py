@@ -27,7 +27,8 @@ Jacobian, which a dense medium's short flights otherwise swing by factors of 10;
 Reversibility: as on surfaces, a step that did not reconnect fails when the backward shift would
 reconnect the base vertex to the offset's new vertex y_{b+1} (:func:`inverse_reconnects_volume`:
 connectable classes, segments long enough, not grazing, the segment x_b -> y_{b+1} free of non-null
-surfaces and arriving in y_{b+1}'s medium).
+surfaces and arriving in y_{b+1}'s medium). tests/test_gpt_volume_reversibility.py shifts base paths
+of the three media scenes forward and back, vertex by vertex.
 """
 
 
