@@ -17,8 +17,8 @@ The per-type kernels live in bsdf_diffuse / bsdf_conductor / bsdf_dielectric / b
 
 **Compiling only the families a scene has**: the material table's tier
 (:mod:`gdlearn.kernels.bsdf.tiers`). The ``_front`` stubs below and the rough plastic's class
-helpers are typed by ``overload`` with the body of the row's tier, so the lean and smooth kernels
-never type the families they cannot meet. The smooth families add delta lobes only, which
+helpers are typed by ``overload`` with the body of the row's tier, so the lean, smooth and glossy
+kernels never type the families they cannot meet. The smooth families add delta lobes only, which
 ``bsdf_eval`` and ``bsdf_pdf`` do not see: their bodies are the lean ones.
 """
 import math
@@ -80,6 +80,19 @@ def _sample_smooth(mat, wi, u_lobe, u1, u2):
 _sample_smooth_inlined = inlined(_sample_smooth)
 
 
+def _sample_glossy(mat, wi, u_lobe, u1, u2):
+    t = int(mat[L.MAT_TYPE])
+    if t == L.DIFFUSE:
+        return diffuse_sample(mat, wi, u1, u2)
+    if t == L.ROUGHCONDUCTOR:
+        return roughconductor_sample(mat, wi, u1, u2)
+    if t == L.ROUGHPLASTIC:
+        return roughplastic_sample(mat, wi, u_lobe, u1, u2)
+    if t == L.NULL:
+        return (-wi[0], -wi[1], -wi[2]), (1.0, 1.0, 1.0), 1.0, True
+    return ZERO3, ZERO3, 0.0, False
+
+
 def _sample_front_all(mat, wi, u_lobe, u1, u2):
     t = int(mat[L.MAT_TYPE])
     if t == L.ROUGHCONDUCTOR:
@@ -99,7 +112,8 @@ def _sample_front(mat, wi, u_lobe, u1, u2):
 
 @overload(_sample_front, jit_options=INLINED_OPTIONS)
 def _sample_front_typed(mat, wi, u_lobe, u1, u2):
-    return {"lean": _sample_lean, "smooth": _sample_smooth, "all": _sample_front_all}[tier_of(mat)]
+    return {"lean": _sample_lean, "smooth": _sample_smooth, "glossy": _sample_glossy,
+            "all": _sample_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -120,6 +134,17 @@ def bsdf_sample(mat, wi, u_lobe, u1, u2):
 def _eval_lean(mat, wi, wo):
     if int(mat[L.MAT_TYPE]) == L.DIFFUSE:
         return diffuse_eval(mat, wi, wo)
+    return ZERO3
+
+
+def _eval_glossy(mat, wi, wo):
+    t = int(mat[L.MAT_TYPE])
+    if t == L.DIFFUSE:
+        return diffuse_eval(mat, wi, wo)
+    if t == L.ROUGHCONDUCTOR:
+        return roughconductor_eval(mat, wi, wo)
+    if t == L.ROUGHPLASTIC:
+        return roughplastic_eval(mat, wi, wo)
     return ZERO3
 
 
@@ -144,7 +169,7 @@ def _eval_front(mat, wi, wo):
 
 @overload(_eval_front, jit_options=INLINED_OPTIONS)
 def _eval_front_typed(mat, wi, wo):
-    return {"lean": _eval_lean, "smooth": _eval_lean, "all": _eval_front_all}[tier_of(mat)]
+    return {"lean": _eval_lean, "smooth": _eval_lean, "glossy": _eval_glossy, "all": _eval_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -158,6 +183,17 @@ def bsdf_eval(mat, wi, wo):
 def _pdf_lean(mat, wi, wo):
     if int(mat[L.MAT_TYPE]) == L.DIFFUSE:
         return diffuse_pdf(mat, wi, wo)
+    return 0.0
+
+
+def _pdf_glossy(mat, wi, wo):
+    t = int(mat[L.MAT_TYPE])
+    if t == L.DIFFUSE:
+        return diffuse_pdf(mat, wi, wo)
+    if t == L.ROUGHCONDUCTOR:
+        return roughconductor_pdf(mat, wi, wo)
+    if t == L.ROUGHPLASTIC:
+        return roughplastic_pdf(mat, wi, wo)
     return 0.0
 
 
@@ -182,7 +218,7 @@ def _pdf_front(mat, wi, wo):
 
 @overload(_pdf_front, jit_options=INLINED_OPTIONS)
 def _pdf_front_typed(mat, wi, wo):
-    return {"lean": _pdf_lean, "smooth": _pdf_lean, "all": _pdf_front_all}[tier_of(mat)]
+    return {"lean": _pdf_lean, "smooth": _pdf_lean, "glossy": _pdf_glossy, "all": _pdf_front_all}[tier_of(mat)]
 
 
 @inlined
@@ -249,7 +285,7 @@ def _spec_prob_tiered(mat, cos_i):
 def _spec_prob_typed(mat, cos_i):
     """:func:`roughplastic_spec_prob` where the tier has rough plastics (its callers test the type
     first), typed for the other tiers without the plastic's tables."""
-    return _spec_prob_all if tier_of(mat) == "all" else _no_spec_prob
+    return _spec_prob_all if tier_of(mat) in ("glossy", "all") else _no_spec_prob
 
 
 def _coat_fraction_tiered(mat, wi, wo):
@@ -259,7 +295,7 @@ def _coat_fraction_tiered(mat, wi, wo):
 @overload(_coat_fraction_tiered, jit_options=INLINED_OPTIONS)
 def _coat_fraction_typed(mat, wi, wo):
     """As :func:`_spec_prob_typed`, for :func:`roughplastic_coat_fraction`."""
-    return _coat_fraction_all if tier_of(mat) == "all" else _no_coat_fraction
+    return _coat_fraction_all if tier_of(mat) in ("glossy", "all") else _no_coat_fraction
 
 
 @block

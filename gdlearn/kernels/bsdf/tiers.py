@@ -2,7 +2,7 @@
 
 numba compiles a kernel once per type of its arguments, and it types an array's write flag and
 memory order. :func:`gdlearn.scene.compile.compile_scene` hands the kernels the material table in
-one of three forms (:func:`tiered_table`), chosen by the families the scene has, and every kernel
+one of four forms (:func:`tiered_table`), chosen by the families the scene has, and every kernel
 that reads ``sa.materials`` is compiled per form:
 
 ======  ================================================  ================================
@@ -10,7 +10,9 @@ tier    BSDF families                                     the table numba is giv
 ======  ================================================  ================================
 lean    diffuse, null (:data:`LEAN_TYPES`)                read-only, row-major
 smooth  + conductor, dielectric (:data:`SMOOTH_TYPES`)    read-only, column-major
-all     every family                                      writable (a row made by
+glossy  lean + rough conductor, rough plastic             writable, column-major
+        (:data:`GLOSSY_TYPES`)
+all     every family                                      writable, row-major (a row made by
                                                           ``dispatch.material_row``, a user's table)
 ======  ================================================  ================================
 
@@ -18,7 +20,9 @@ all     every family                                      writable (a row made b
 ``bsdf_sample``, ``bsdf_eval`` and ``bsdf_pdf`` with that tier's families only. The plastics and
 the rough families, inlined into every caller, were a quarter of ``pt``'s cold compile on the fog
 box, and more than a third of gpt's on the glass sphere close-up (benchmarks/README.md, "Only the
-families a scene has"). A column-major table of one row is row-major too (numpy sets both flags),
+families a scene has"); the glossy tier took 3 s off pt's and 5-11 s off gpt's on the glossy box
+("A glossy tier"). A row's type carries two bits (write flag, row-major or strided), so four tiers
+is as far as this goes. A column-major table of one row is row-major too (numpy sets both flags),
 so a one-material scene outside the lean tier gets every family. The rule is checked against each
 shipped scene file, and the tiers' images against the full kernels', in tests/test_bsdf_lean.py.
 """
@@ -30,15 +34,22 @@ from gdlearn.kernels import layout as L
 LEAN_TYPES = (L.DIFFUSE, L.NULL)
 #: the BSDF types of a smooth one (read-only, column-major): the lean ones and the delta-only families
 SMOOTH_TYPES = LEAN_TYPES + (L.CONDUCTOR, L.DIELECTRIC)
+#: the BSDF types of a glossy one (writable, column-major): the lean ones and the rough reflectors
+GLOSSY_TYPES = LEAN_TYPES + (L.ROUGHCONDUCTOR, L.ROUGHPLASTIC)
 
 
 def table_tier(materials: np.ndarray) -> str:
-    """"lean", "smooth" or "all": the smallest tier whose families hold every row of ``materials``."""
+    """"lean", "smooth", "glossy" or "all": the first tier whose families hold every row of
+    ``materials``. A column-major table of one row is row-major too, so only "lean" and "all" can
+    name a one-row table."""
     types = materials[:, L.MAT_TYPE].astype(np.int64)
     if np.isin(types, LEAN_TYPES).all():
         return "lean"
-    if np.isin(types, SMOOTH_TYPES).all() and materials.shape[0] > 1:
-        return "smooth"
+    if materials.shape[0] > 1:
+        if np.isin(types, SMOOTH_TYPES).all():
+            return "smooth"
+        if np.isin(types, GLOSSY_TYPES).all():
+            return "glossy"
     return "all"
 
 
@@ -46,14 +57,14 @@ def tiered_table(materials: np.ndarray) -> np.ndarray:
     """A copy of ``materials`` in the form of its tier (:func:`table_tier`): the kernels compiled for
     it leave the other BSDF families out."""
     tier = table_tier(materials)
-    table = np.array(materials, dtype=np.float64, order="F" if tier == "smooth" else "C")
-    table.flags.writeable = tier == "all"
+    table = np.array(materials, dtype=np.float64, order="F" if tier in ("smooth", "glossy") else "C")
+    table.flags.writeable = tier in ("glossy", "all")
     return table
 
 
 def tier_of(mat) -> str:
     """At typing: the tier of the table that ``mat`` (a numba array type) is a row of. A row of a
-    read-only row-major table is row-major; of a column-major one, strided (layout "A")."""
+    row-major table is row-major; of a column-major one, strided (layout "A")."""
     if getattr(mat, "mutable", True):
-        return "all"
+        return "all" if getattr(mat, "layout", "C") == "C" else "glossy"
     return "lean" if mat.layout == "C" else "smooth"
