@@ -36,10 +36,9 @@ from numba import prange
 
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_sample, sampled_lobe_class, vertex_class
-from gdlearn.kernels.bsdf.plastic import _spec_prob
+from gdlearn.kernels.bsdf.plastic import plastic_spec_prob
 from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
-from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
 from gdlearn.kernels.lights import eval_emitter, sample_emitter
 from gdlearn.kernels.scene_query import occluded
@@ -105,7 +104,7 @@ def _leave(mat, prm, h, b, wi, state, beta):
     if not pdf > 0.0:
         return STOP, wo, beta, state
     if plastic and not delta:
-        pb = 1.0 - _spec_prob(fresnel_dielectric(abs(wi[2]), mat[L.MAT_ETA])[0], mat)
+        pb = 1.0 - plastic_spec_prob(mat, abs(wi[2]))
         return GATHER, wi, (beta[0] / pb, beta[1] / pb, beta[2] / pb), pc_push(state, L.V_DIFFUSE)
     state = pc_push(state, sampled_lobe_class(mat, wi, u_lobe, delta, prm.threshold))
     return CONTINUE, wo, (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]), state

@@ -116,6 +116,12 @@ def rough_transmittance(mat, cos_theta):
 
 
 @block
+def plastic_spec_prob(mat, cos_i):
+    """Probability that plastic_sample picks the delta coating at incidence cos_i > 0."""
+    return _spec_prob(fresnel_dielectric(cos_i, mat[MAT_ETA])[0], mat)
+
+
+@block
 def roughplastic_spec_prob(mat, cos_i):
     """Probability that roughplastic_sample picks the microfacet coating at incidence cos_i."""
     return _spec_prob(1.0 - rough_transmittance(mat, cos_i), mat)
