@@ -148,19 +148,17 @@ def _eval_glossy(mat, wi, wo):
     return ZERO3
 
 
+#: the glossy body as a function compiled code can call (the full body ends in it)
+_eval_glossy_inlined = inlined(_eval_glossy)
+
+
 def _eval_front_all(mat, wi, wo):
     t = int(mat[L.MAT_TYPE])
-    if t == L.DIFFUSE:
-        return diffuse_eval(mat, wi, wo)
-    if t == L.ROUGHCONDUCTOR:
-        return roughconductor_eval(mat, wi, wo)
     if t == L.ROUGHDIELECTRIC:
         return roughdielectric_eval(mat, wi, wo)
     if t == L.PLASTIC:
         return plastic_eval(mat, wi, wo)
-    if t == L.ROUGHPLASTIC:
-        return roughplastic_eval(mat, wi, wo)
-    return ZERO3         # conductor, dielectric, null: delta lobes only
+    return _eval_glossy_inlined(mat, wi, wo)     # conductor, dielectric, null: zero (delta lobes only)
 
 
 def _eval_front(mat, wi, wo):
@@ -197,19 +195,16 @@ def _pdf_glossy(mat, wi, wo):
     return 0.0
 
 
+_pdf_glossy_inlined = inlined(_pdf_glossy)
+
+
 def _pdf_front_all(mat, wi, wo):
     t = int(mat[L.MAT_TYPE])
-    if t == L.DIFFUSE:
-        return diffuse_pdf(mat, wi, wo)
-    if t == L.ROUGHCONDUCTOR:
-        return roughconductor_pdf(mat, wi, wo)
     if t == L.ROUGHDIELECTRIC:
         return roughdielectric_pdf(mat, wi, wo)
     if t == L.PLASTIC:
         return plastic_pdf(mat, wi, wo)
-    if t == L.ROUGHPLASTIC:
-        return roughplastic_pdf(mat, wi, wo)
-    return 0.0
+    return _pdf_glossy_inlined(mat, wi, wo)
 
 
 def _pdf_front(mat, wi, wo):
