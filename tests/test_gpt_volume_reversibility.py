@@ -3,7 +3,7 @@ Fig. 4), the volume kernel's counterpart of tests/test_gpt_reversibility.py.
 
 Eq. 17's weights of a forward and a backward shift sum to one only on pairs the backward shift maps
 back. Here base paths x of the volume kernel (volpath's flights across null interfaces, scattering
-vertices, diffuse surfaces) are shifted one pixel to the right by the kernel's own segment step
+vertices, diffuse surfaces, glass) are shifted one pixel to the right by the kernel's own segment step
 (``gpt_volume.lockstep._shift_all``, which calls ``gpt_volume.mixed.shift_free_mixed``), and the
 offset path y is recorded. Then y is taken as the base path of the right-hand pixel and shifted back
 to the left by the same step:
@@ -18,12 +18,15 @@ The backward offset must reproduce x's vertices (their kinds and positions) and 
 where the forward shift did. A pair the forward shift declared failed proves nothing and is skipped.
 Next-event samples, emission and roulette are left out: the shift map does not depend on them.
 
-The scenes hold only diffuse surfaces and media, so every continued step is a replay (the two mixed
-policies run the same shifts there). They fail it: ``BROKEN_REVERSIBILITY`` (no check after a step
-that did not reconnect), and a short-segment guard (``reconnection.far_enough``) left out of the
-forward decision but kept in the check (measured: 39-132 and 24-60 violations per scene). Seeds are fixed;
-nothing here is statistical (positions agree to rounding: the tolerance 1e-6 is ~1e-6 of the scene
-size).
+The policy is ``replay+reconnection``: every step that does not reconnect replays, at glass too
+(the volume caustic's ball), so the backward base is volpath's path with x's numbers up to the
+reconnection. (``halfvector+replay+reconnection`` copies half vectors at glass instead, and the
+backward base would then need the copied directions; on the three scenes without glass the two
+policies run the same shifts.) Two planted faults fail it: ``BROKEN_REVERSIBILITY`` (no check
+after a step that did not reconnect), and a short-segment guard (``reconnection.far_enough``) left
+out of the forward decision but kept in the check (measured: 32-132 and 24-60 violations per
+scene). Seeds are fixed; nothing here is statistical (positions agree to rounding: the tolerance
+1e-6 is ~1e-6 of the scene size).
 """
 import math
 
@@ -205,11 +208,11 @@ def check(scene_name, policy, broken=0, res=16, spp=8, seed=5):
     return c
 
 
-@pytest.mark.parametrize("scene_name", ["medium-cube", "fog-box", "spot-medium"])
+@pytest.mark.parametrize("scene_name", ["medium-cube", "fog-box", "spot-medium", "volume-caustic"])
 def test_backward_shift_returns_the_base_path(scene_name):
     c = check(scene_name, "replay+reconnection")
     # enough non-trivial pairs: reconnected (some at medium vertices), and continued by replay first
-    # (measured: 1786-1881 checked, 213-1647 joined, 136-1071 at medium vertices, 364-1301 continued)
+    # (measured: 1786-1888 checked, 213-1647 joined, 136-1071 at medium vertices, 364-1362 continued)
     assert c["checked"] > 1500 and c["joined"] > 150 and c["media_joins"] > 100 and c["continued"] > 250, c
     assert c["violations"] == 0, f"T^-1(T(x)) != x on {c['violations']} pairs of {scene_name}: {c}"
 
