@@ -28,7 +28,7 @@ Reversibility: as on surfaces, a step that did not reconnect fails when the back
 reconnect the base vertex to the offset's new vertex y_{b+1} (:func:`inverse_reconnects_volume`:
 connectable classes, segments long enough, not grazing, the segment x_b -> y_{b+1} free of non-null
 surfaces and arriving in y_{b+1}'s medium). tests/test_gpt_volume_reversibility.py shifts base paths
-of the three media scenes forward and back, vertex by vertex.
+of the four media scenes forward and back, vertex by vertex.
 """
 
 
