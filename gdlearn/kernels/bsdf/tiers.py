@@ -53,18 +53,23 @@ def table_tier(materials: np.ndarray) -> str:
     return "all"
 
 
+#: each tier's table form, (writable, memory order): the one place the encoding is written down.
+#: numba types a row of a column-major table as strided (layout "A"), of a row-major one as "C".
+FORMS = {"lean": (False, "C"), "smooth": (False, "F"), "glossy": (True, "F"), "all": (True, "C")}
+_TIER_OF_ROW = {(writable, "C" if order == "C" else "A"): tier for tier, (writable, order) in FORMS.items()}
+
+
 def tiered_table(materials: np.ndarray) -> np.ndarray:
-    """A copy of ``materials`` in the form of its tier (:func:`table_tier`): the kernels compiled for
-    it leave the other BSDF families out."""
-    tier = table_tier(materials)
-    table = np.array(materials, dtype=np.float64, order="F" if tier in ("smooth", "glossy") else "C")
-    table.flags.writeable = tier in ("glossy", "all")
+    """A copy of ``materials`` in the form of its tier (:func:`table_tier`, :data:`FORMS`): the
+    kernels compiled for it leave the other BSDF families out."""
+    writable, order = FORMS[table_tier(materials)]
+    table = np.array(materials, dtype=np.float64, order=order)
+    table.flags.writeable = writable
     return table
 
 
 def tier_of(mat) -> str:
-    """At typing: the tier of the table that ``mat`` (a numba array type) is a row of. A row of a
-    row-major table is row-major; of a column-major one, strided (layout "A")."""
-    if getattr(mat, "mutable", True):
-        return "all" if getattr(mat, "layout", "C") == "C" else "glossy"
-    return "lean" if mat.layout == "C" else "smooth"
+    """At typing: the tier of the table that ``mat`` (a numba array type) is a row of
+    (:data:`FORMS` read backwards from the row's write flag and layout)."""
+    layout = getattr(mat, "layout", "C")
+    return _TIER_OF_ROW[(getattr(mat, "mutable", True), "C" if layout == "C" else "A")]
