@@ -60,6 +60,19 @@ def test_twosided_and_rr_depth():
     assert np.array_equal(a, b)
 
 
+def test_twosided_faces_seen_from_behind():
+    # every face but the light's flipped, so each vertex is shaded from its back: the twosided
+    # mirroring of wi and wo in the deferred diffuse next-event estimates (packet_nee), which the
+    # closed box above never reaches (its rays meet front sides only). Leaving the mirroring out of
+    # nee_diffuse_area fails this test and no other of this file.
+    scene = copy.deepcopy(cornell_box(res=20))
+    for sh in scene.shapes:
+        sh.bsdf.twosided = True
+        sh.flip_normals = sh.emitter is None
+    a, b, _, _ = _pair(scene, spp=4)
+    assert a.mean() > 0 and np.array_equal(a, b)
+
+
 def test_the_mesh_scene_a_tree_of_leaves():
     """mesh.xml: 1600 triangles in a tree (the packet traces ray by ray with the scalar traversal)."""
     scene = load(ROOT / "scenes" / "mesh.xml", res=16, max_depth=8)

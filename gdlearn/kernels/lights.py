@@ -93,7 +93,7 @@ def prim_point(prims, prim_info, prim, u1, u2):
 
 
 @inlined
-def _pick_prim(em_cdf, first, count, u):
+def pick_prim(em_cdf, first, count, u):
     """Binary search of the first cdf entry > u in em_cdf[first:first+count]."""
     lo = first
     hi = first + count - 1
@@ -149,6 +149,16 @@ def same_direction_point(emitters, em, p_base, q_base, p):
     return (p[0] + f * dx, p[1] + f * dy, p[2] + f * dz)
 
 
+@inlined
+def pick_emitter(emitters, u_sel):
+    """The emitter ``u_sel`` picks uniformly (``Scene::sample_emitter``) and the leftover of u_sel,
+    uniform in [0, 1), which picks its primitive."""
+    n_em = emitters.shape[0]
+    x = u_sel * n_em
+    em = min(int(x), n_em - 1)
+    return em, min(x - em, 0.9999999999999999)
+
+
 # forceinline: as above
 @inlined
 def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u2):
@@ -166,14 +176,12 @@ def sample_emitter(emitters, em_prims, em_cdf, prims, prim_info, p, u_sel, u1, u
     zero = (0.0, 0.0, 0.0)
     if n_em == 0:
         return -1, p, zero, zero, 0.0, zero, 0.0, 0.0, False
-    x = u_sel * n_em
-    em = min(int(x), n_em - 1)
-    u_rest = min(x - em, 0.9999999999999999)   # the leftover of u_sel picks the primitive
+    em, u_rest = pick_emitter(emitters, u_sel)
     et = int(emitters[em, EM_TYPE])
     sel = 1.0 / n_em
     rgb = (emitters[em, EM_RGB], emitters[em, EM_RGB + 1], emitters[em, EM_RGB + 2])
     if et == E_AREA:
-        prim = _pick_prim(em_cdf, int(emitters[em, EM_FIRST]), int(emitters[em, EM_COUNT]), u_rest)
+        prim = pick_prim(em_cdf, int(emitters[em, EM_FIRST]), int(emitters[em, EM_COUNT]), u_rest)
         q, nq = prim_point(prims, prim_info, em_prims[prim], u1, u2)
         dv = (q[0] - p[0], q[1] - p[1], q[2] - p[2])
         dist2 = dot(dv, dv)

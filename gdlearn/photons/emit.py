@@ -30,7 +30,7 @@ import numpy as np
 
 
 from gdlearn.kernels import lights as li
-from gdlearn.kernels.lights import _pick_prim, prim_point, spot_falloff
+from gdlearn.kernels.lights import pick_prim, prim_point, spot_falloff
 from gdlearn.kernels.sampling import square_to_uniform_cone, square_to_uniform_disk_concentric
 from gdlearn.kernels.vec import coordinate_system, to_world
 from gdlearn.kernels.jit import block, inlined
@@ -73,7 +73,7 @@ def emitter_cdf(sa) -> np.ndarray:
 @inlined
 def _select(cdf, u):
     """(index, probability, leftover uniform in [0, 1)) of the first cdf entry > u."""
-    i = _pick_prim(cdf, 0, cdf.shape[0], u)
+    i = pick_prim(cdf, 0, cdf.shape[0], u)
     lo = cdf[i - 1] if i > 0 else 0.0
     p = cdf[i] - lo
     rest = min((u - lo) / p, 0.9999999999999999) if p > 0.0 else 0.0
@@ -98,7 +98,7 @@ def sample_emission(sa, cdf, u):
     et = int(sa.emitters[em, li.EM_TYPE])
     rgb = (sa.emitters[em, li.EM_RGB], sa.emitters[em, li.EM_RGB + 1], sa.emitters[em, li.EM_RGB + 2])
     if et == li.E_AREA:
-        prim = sa.em_prims[_pick_prim(sa.em_cdf, int(sa.emitters[em, li.EM_FIRST]),
+        prim = sa.em_prims[pick_prim(sa.em_cdf, int(sa.emitters[em, li.EM_FIRST]),
                                       int(sa.emitters[em, li.EM_COUNT]), u_rest)]
         p, n = prim_point(sa.prims, sa.prim_info, prim, u[1], u[2])
         s, t = coordinate_system(n)

@@ -15,8 +15,8 @@ samples in their order: the five buffers and the counters equal the one-path ker
 import numpy as np
 
 from gdlearn.integrators.path import packet_volume
-from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS, fill_pixel_items, new_buffers,
-                                             trace_items)
+from gdlearn.integrators.path.packet import fill_pixel_items, trace_items
+from gdlearn.integrators.path.packet_rows import IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS, new_buffers
 from gdlearn.integrators.path.packet_volume import trace_items_volume
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.arrays import borrowed

@@ -21,53 +21,34 @@ tracks no path classes: with nothing to drop, every contribution counts). Everyt
 with :mod:`gdlearn.integrators.path.surface`. Rays are traced as a packet when the scene is one leaf
 (the Cornell box, the glossy box, the glass and mirror spheres of the caustic scenes), else ray by
 ray with the scalar traversal (trees: incoherent rays through a tree share too few nodes for a
-packet to pay), and still gain from the lanes' overlap.
+packet to pay), and still gain from the lanes' overlap. The next-event estimates of diffuse
+vertices run SIMD over the lanes too (:mod:`gdlearn.integrators.path.packet_nee`); the lanes' state
+is laid out in :mod:`gdlearn.integrators.path.packet_rows`.
 """
 import math
 
 import numpy as np
 
 
-from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample
+from gdlearn.integrators.path.packet_nee import defer_diffuse_area, nee_diffuse_area, nee_lane
+from gdlearn.integrators.path.packet_rows import (IT_FX, IT_FY, IT_KEY, IT_S, Q_ALIVE, Q_CONT, Q_DELTA, Q_DEPTH,
+                                                  Q_EMP, Q_H, Q_ITEM, Q_MAT, Q_NEE, R_BETA, R_C, R_ETA, R_FS, R_FT,
+                                                  R_L, R_NG, R_NS, R_O, R_P, R_PP, R_PPDF, R_SO, R_UBSDF, R_UEM,
+                                                  R_URR, R_WI, R_WO, get3, set3)
+from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
+from gdlearn.kernels.accel.packet import PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
+from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_is_delta_only, bsdf_sample
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
+from gdlearn.kernels.jit import ir_inline, leaf
 from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE, NULL
-from gdlearn.kernels.lights import emitter_pdf, eval_emitter, sample_emitter
-from gdlearn.kernels.accel.packet import N_Q_TRACE, N_S_TRACE, PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
+from gdlearn.kernels.lights import emitter_pdf, eval_emitter
 from gdlearn.kernels.pathclass import (CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, EMISSION, GLOSSY,
                                        MEDIA_TRANSPORT, SPECULAR, SURFACE_TRANSPORT)
 from gdlearn.kernels.rng import path_state, rand, rand_at
 from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_hemisphere
-from gdlearn.kernels.scene_query import shadow_ray
-from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
-from gdlearn.kernels.jit import block, ir_inline, leaf
-
-# float rows (after the traversal's): the ray set of the next closest hit, the shadow ray set,
-# throughput, radiance, beta * next-event term waiting for its shadow ray, previous vertex, its pdf, eta
-R_O = N_S_TRACE
-R_SO = R_O + 7
-R_BETA = R_SO + 7
-R_L = R_BETA + 3
-R_C = R_L + 3
-R_PP = R_C + 3
-R_PPDF = R_PP + 3
-R_ETA = R_PPDF + 1
-R_UEM = R_ETA + 1       # 3: this bounce's random numbers for the emitter sample
-R_WO = R_UEM + 3        # 3: its cosine-weighted direction (local frame) for the BSDF sample
-R_URR = R_WO + 3        # its Russian-roulette number
-R_UBSDF = R_URR + 1     # 3: its BSDF sample's numbers (lobe, direction) for other BSDFs than diffuse
-R_P, R_NG, R_NS, R_FS, R_FT, R_WI = (R_UBSDF + 3 + 3 * k for k in range(6))   # the vertex: point, normals,
-N_S = R_WI + 3                                                            # shading frame, wi (local)
-# int rows (after the traversal's): path state, bounce, item (-1: idle lane), previous vertex delta,
-# path goes on after this bounce, a next-event term is pending
-Q_H = N_Q_TRACE
-Q_DEPTH, Q_ITEM, Q_DELTA, Q_ALIVE, Q_NEE = Q_H + 1, Q_H + 2, Q_H + 3, Q_H + 4, Q_H + 5
-Q_MAT, Q_CONT = Q_H + 6, Q_H + 7        # the vertex's material row; the bounce scatters at the vertex
-N_Q = Q_CONT + 1
-#: items (pixel, sample) whose radiance a row keeps before summing them per pixel
-N_ITEMS = 4096
 
 
 def eligible(sa, mask, max_depth, possible) -> bool:
@@ -94,29 +75,6 @@ def use_packets(requested, eligible_here: bool, rule: str) -> bool:
     return eligible_here if requested is None else bool(requested) and eligible_here
 
 
-#: columns of the item table: film position x, y (raster), the pixel key and sample index whose
-#: random numbers the path uses (for random-sequence replay, another pixel's than the film position's)
-IT_FX, IT_FY, IT_KEY, IT_S = range(4)
-
-
-@block
-def new_buffers():
-    """A row's packet state (S, Q), item radiances and item table (N_ITEMS x 4, float64: every
-    integer in it is far below 2^53)."""
-    return (np.zeros(N_S * PK), np.zeros(N_Q * PK, dtype=np.int64), np.zeros(3 * N_ITEMS),
-            np.zeros((N_ITEMS, 4)))
-
-
-@leaf
-def _get3(S, r, j):
-    return (S[r * PK + j], S[(r + 1) * PK + j], S[(r + 2) * PK + j])
-
-
-@leaf
-def _set3(S, r, j, v):
-    S[r * PK + j], S[(r + 1) * PK + j], S[(r + 2) * PK + j] = v[0], v[1], v[2]
-
-
 @leaf
 def _start(sa, S, Q, j, item, items, seed):
     """Lane j starts the path of ``item`` (a row of the item table ``items``): the camera ray through
@@ -124,42 +82,18 @@ def _start(sa, S, Q, j, item, items, seed):
     sample."""
     key, s = np.int64(items[item, IT_KEY]), np.int64(items[item, IT_S])
     o, d, tmax = camera_ray(sa.camera, items[item, IT_FX], items[item, IT_FY])
-    _set3(S, R_O, j, o)
-    _set3(S, R_O + 3, j, d)
+    set3(S, R_O, j, o)
+    set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = tmax
-    _set3(S, R_BETA, j, (1.0, 1.0, 1.0))
-    _set3(S, R_L, j, (0.0, 0.0, 0.0))
-    _set3(S, R_PP, j, o)
+    set3(S, R_BETA, j, (1.0, 1.0, 1.0))
+    set3(S, R_L, j, (0.0, 0.0, 0.0))
+    set3(S, R_PP, j, o)
     S[R_PPDF * PK + j] = 1.0
     S[R_ETA * PK + j] = 1.0
     Q[Q_H * PK + j] = np.int64(path_state(seed, key, s))
     Q[Q_DEPTH * PK + j] = 0
     Q[Q_DELTA * PK + j] = 1
     Q[Q_ITEM * PK + j] = item
-
-
-@ir_inline
-def _nee(sa, S, Q, j, p, ng, frame, wi, mat, beta):
-    """``surface_path.nee_surface`` for lane j up to its visibility test: the term times beta waits
-    in R_C, its shadow ray in R_SO (tmax -1: no ray to test, the term counts as visible)."""
-    s, t, n = frame
-    em, q, nq, dl, dist, w_em, pdf_em, pdf_a, delta = sample_emitter(
-        sa.emitters, sa.em_prims, sa.em_cdf, sa.prims, sa.prim_info, p,
-        S[R_UEM * PK + j], S[(R_UEM + 1) * PK + j], S[(R_UEM + 2) * PK + j])
-    if em < 0:
-        return
-    wo = to_local(dl, s, t, n)
-    f = bsdf_eval(mat, wi, wo)
-    if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
-        return
-    o, d, tmax = shadow_ray(p, ng, q)
-    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))   # nee_class_share: 1
-    c = (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
-    _set3(S, R_C, j, (beta[0] * c[0], beta[1] * c[1], beta[2] * c[2]))
-    _set3(S, R_SO, j, o)
-    _set3(S, R_SO + 3, j, d)
-    S[(R_SO + 6) * PK + j] = tmax if tmax > 0.0 else -1.0
-    Q[Q_NEE * PK + j] = 1
 
 
 @leaf
@@ -174,8 +108,8 @@ def _draw(S, Q):
         S[(R_UEM + 1) * PK + j] = rand_at(h, dim(b, D_EM_U1))
         S[(R_UEM + 2) * PK + j] = rand_at(h, dim(b, D_EM_U2))
         u1, u2 = rand_at(h, dim(b, D_BSDF_U1)), rand_at(h, dim(b, D_BSDF_U2))
-        _set3(S, R_WO, j, square_to_cosine_hemisphere(u1, u2))
-        _set3(S, R_UBSDF, j, (rand_at(h, dim(b, D_LOBE)), u1, u2))
+        set3(S, R_WO, j, square_to_cosine_hemisphere(u1, u2))
+        set3(S, R_UBSDF, j, (rand_at(h, dim(b, D_LOBE)), u1, u2))
         S[R_URR * PK + j] = rand_at(h, dim(b, D_RR))
 
 
@@ -202,7 +136,7 @@ def _emission(sa, S, Q, j, prim, p, ns, d, beta):
     if le[0] + le[1] + le[2] > 0.0:
         w = 1.0
         if Q[Q_DELTA * PK + j] == 0:
-            w = power_heuristic(S[R_PPDF * PK + j], emitter_pdf(sa.emitters, em, _get3(S, R_PP, j), p, ns))
+            w = power_heuristic(S[R_PPDF * PK + j], emitter_pdf(sa.emitters, em, get3(S, R_PP, j), p, ns))
         S[R_L * PK + j] += beta[0] * le[0] * w
         S[(R_L + 1) * PK + j] += beta[1] * le[1] * w
         S[(R_L + 2) * PK + j] += beta[2] * le[2] * w
@@ -215,36 +149,37 @@ def _shade_hit(sa, S, Q, j, max_depth):
     Q[Q_ALIVE * PK + j] = 0
     Q[Q_NEE * PK + j] = 0
     Q[Q_CONT * PK + j] = 0
+    Q[Q_EMP * PK + j] = -1
     S[(R_SO + 6) * PK + j] = -1.0
     prim = Q[Q_PRIM * PK + j]
     if Q[Q_ITEM * PK + j] < 0 or prim < 0:          # idle, or escaped (no environment)
         return
-    o, d = _get3(S, R_O, j), _get3(S, R_O + 3, j)
+    o, d = get3(S, R_O, j), get3(S, R_O + 3, j)
     p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, S[(R_O + 6) * PK + j], S[S_U * PK + j], S[S_V * PK + j])
-    _emission(sa, S, Q, j, prim, p, ns, d, _get3(S, R_BETA, j))
+    _emission(sa, S, Q, j, prim, p, ns, d, get3(S, R_BETA, j))
     if Q[Q_DEPTH * PK + j] + 1 >= max_depth:
         return
     s, tt = coordinate_system(ns)
-    _set3(S, R_WI, j, to_local((-d[0], -d[1], -d[2]), s, tt, ns))
-    _set3(S, R_P, j, p)
-    _set3(S, R_NG, j, ng)
-    _set3(S, R_NS, j, ns)
-    _set3(S, R_FS, j, s)
-    _set3(S, R_FT, j, tt)
+    set3(S, R_WI, j, to_local((-d[0], -d[1], -d[2]), s, tt, ns))
+    set3(S, R_P, j, p)
+    set3(S, R_NG, j, ng)
+    set3(S, R_NS, j, ns)
+    set3(S, R_FS, j, s)
+    set3(S, R_FT, j, tt)
     Q[Q_MAT * PK + j] = sa.prim_info[prim, INFO_MAT]
     Q[Q_CONT * PK + j] = 1
 
 
 @leaf
 def _shade_nee(sa, S, Q, j):
-    """The next-event estimate of lane j's vertex (pending its shadow ray)."""
+    """The next-event estimate of lane j's vertex (pending its shadow ray), or its deferral."""
     if Q[Q_CONT * PK + j] == 0:
         return
     mat = sa.materials[Q[Q_MAT * PK + j]]
-    if bsdf_is_delta_only(mat):
+    if bsdf_is_delta_only(mat) or defer_diffuse_area(sa, S, Q, j, mat):
         return
-    frame = (_get3(S, R_FS, j), _get3(S, R_FT, j), _get3(S, R_NS, j))
-    _nee(sa, S, Q, j, _get3(S, R_P, j), _get3(S, R_NG, j), frame, _get3(S, R_WI, j), mat, _get3(S, R_BETA, j))
+    frame = (get3(S, R_FS, j), get3(S, R_FT, j), get3(S, R_NS, j))
+    nee_lane(sa, S, Q, j, get3(S, R_P, j), get3(S, R_NG, j), frame, get3(S, R_WI, j), mat, get3(S, R_BETA, j))
 
 
 @leaf
@@ -253,23 +188,23 @@ def _shade_next(sa, S, Q, j, rr_depth):
     if Q[Q_CONT * PK + j] == 0:
         return
     mat = sa.materials[Q[Q_MAT * PK + j]]
-    wi = _get3(S, R_WI, j)
+    wi = get3(S, R_WI, j)
     if mat[MAT_TYPE] == DIFFUSE:
-        wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, _get3(S, R_WO, j))
+        wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, get3(S, R_WO, j))
     else:
-        u = _get3(S, R_UBSDF, j)
+        u = get3(S, R_UBSDF, j)
         wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u[0], u[1], u[2])
     if not pdf > 0.0:
         return
-    beta = _get3(S, R_BETA, j)
+    beta = get3(S, R_BETA, j)
     beta = (beta[0] * weight[0], beta[1] * weight[1], beta[2] * weight[2])
     eta = S[R_ETA * PK + j] * bsdf_eta(mat, wi, wo)
-    p, ng = _get3(S, R_P, j), _get3(S, R_NG, j)
-    d = to_world(wo, _get3(S, R_FS, j), _get3(S, R_FT, j), _get3(S, R_NS, j))
-    _set3(S, R_O, j, offset_origin(p, ng, d))
-    _set3(S, R_O + 3, j, d)
+    p, ng = get3(S, R_P, j), get3(S, R_NG, j)
+    d = to_world(wo, get3(S, R_FS, j), get3(S, R_FT, j), get3(S, R_NS, j))
+    set3(S, R_O, j, offset_origin(p, ng, d))
+    set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = math.inf
-    _set3(S, R_PP, j, p)
+    set3(S, R_PP, j, p)
     S[R_PPDF * PK + j] = pdf
     S[R_ETA * PK + j] = eta
     Q[Q_DELTA * PK + j] = np.int64(is_delta)
@@ -283,7 +218,7 @@ def _shade_next(sa, S, Q, j, rr_depth):
         beta = (beta[0] / q, beta[1] / q, beta[2] / q)
     if not bmax > 0.0:
         return
-    _set3(S, R_BETA, j, beta)
+    set3(S, R_BETA, j, beta)
     Q[Q_ALIVE * PK + j] = 1
 
 
@@ -295,7 +230,7 @@ def _trace(sa, S, Q, ro, stack, any_hit):
         packet_trace(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, ro, stack, any_hit)
         return
     for j in range(PK):
-        o, d, tmax = _get3(S, ro, j), _get3(S, ro + 3, j), S[(ro + 6) * PK + j]
+        o, d, tmax = get3(S, ro, j), get3(S, ro + 3, j), S[(ro + 6) * PK + j]
         if any_hit:
             Q[Q_HIT * PK + j] = 0
             if tmax > 0.0:
@@ -349,9 +284,11 @@ def trace_items(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
     while busy > 0:
         _trace(sa, S, Q, R_O, stack, False)
         _draw(S, Q)
-        for j in range(PK):                # one loop: three loops measured no faster
+        for j in range(PK):
             _shade_hit(sa, S, Q, j, max_depth)
             _shade_nee(sa, S, Q, j)
+        nee_diffuse_area(S, Q)             # the deferred estimates read beta before _shade_next
+        for j in range(PK):
             _shade_next(sa, S, Q, j, rr_depth)
         _trace(sa, S, Q, R_SO, stack, True)
         nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, items, seed)

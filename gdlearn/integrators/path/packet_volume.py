@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from gdlearn.integrators.path.packet import (IT_FX, IT_FY, IT_KEY, IT_S, _get3, _set3, _trace, fill_pixel_items,
-                                             sum_items, write_row)
+from gdlearn.integrators.path.packet import _trace, fill_pixel_items, sum_items, write_row
+from gdlearn.integrators.path.packet_rows import IT_FX, IT_FY, IT_KEY, IT_S, get3, set3
 from gdlearn.integrators.path.surface import (D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_MED_CH,
                                               D_MED_T, D_RR, dim, flight_dim)
 from gdlearn.integrators.path.volume import MAX_SEGMENTS, roulette, shadow_march, shadow_start, shadow_step
@@ -91,13 +91,13 @@ def _start(sa, S, Q, j, item, items, seed):
     """Lane j starts ``radiance_volpath``'s path of ``item`` (film position, key, sample)."""
     key, s = np.int64(items[item, IT_KEY]), np.int64(items[item, IT_S])
     o, d, tmax = camera_ray(sa.camera, items[item, IT_FX], items[item, IT_FY])
-    _set3(S, R_O, j, o)
-    _set3(S, R_O + 3, j, d)
+    set3(S, R_O, j, o)
+    set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = tmax
-    _set3(S, R_BETA, j, (1.0, 1.0, 1.0))
-    _set3(S, R_L, j, (0.0, 0.0, 0.0))
+    set3(S, R_BETA, j, (1.0, 1.0, 1.0))
+    set3(S, R_L, j, (0.0, 0.0, 0.0))
     S[R_ETA * PK + j] = 1.0
-    _set3(S, R_PP, j, o)
+    set3(S, R_PP, j, o)
     S[R_PPDF * PK + j] = 1.0
     Q[Q_H * PK + j] = np.int64(path_state(seed, key, s))
     Q[Q_DEPTH * PK + j] = 0
@@ -143,16 +143,16 @@ def _nee_setup(sa, S, Q, j, p, ng, prim, medium, a):
         return em, dl, pdf_em, delta
     if prim >= 0:
         medium = next_medium(sa.prim_info, prim, medium, dl, ng)
-    _set3(S, R_A, j, a)
-    _set3(S, R_WEM, j, w_em)
-    _set3(S, R_Q, j, q)
+    set3(S, R_A, j, a)
+    set3(S, R_WEM, j, w_em)
+    set3(S, R_Q, j, q)
     Q[Q_SMED * PK + j] = medium
     o, d, remaining = shadow_start(p, ng, q)
     if remaining < 0.0:                      # the light point is the vertex: transmittance 1
         Q[Q_NEE * PK + j] = 2
         return em, dl, pdf_em, delta
-    _set3(S, R_SO, j, o)
-    _set3(S, R_SO + 3, j, d)
+    set3(S, R_SO, j, o)
+    set3(S, R_SO + 3, j, d)
     S[(R_SO + 6) * PK + j] = remaining
     S[R_REM * PK + j] = remaining
     Q[Q_NEE * PK + j] = 1
@@ -162,8 +162,8 @@ def _nee_setup(sa, S, Q, j, p, ng, prim, medium, a):
 @leaf
 def _nee_factor(S, j, f, k):
     """The pending term's A becomes A f (the BSDF value; ``volume``'s beta f), and its MIS factor k."""
-    a = _get3(S, R_A, j)
-    _set3(S, R_A, j, (a[0] * f[0], a[1] * f[1], a[2] * f[2]))
+    a = get3(S, R_A, j)
+    set3(S, R_A, j, (a[0] * f[0], a[1] * f[1], a[2] * f[2]))
     S[R_K * PK + j] = k
 
 
@@ -176,7 +176,7 @@ def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
         return
     p = (o[0] + ts * d[0], o[1] + ts * d[1], o[2] + ts * d[2])
     wi = (-d[0], -d[1], -d[2])
-    beta = _get3(S, R_BETA, j)
+    beta = get3(S, R_BETA, j)
     em, dl, pdf_em, delta = _nee_setup(sa, S, Q, j, p, (0.0, 0.0, 0.0), -1, medium, beta)
     if em >= 0:                             # the phase function's term, MIS-weighted
         ph = hg_eval(g, dot(wi, dl))
@@ -184,7 +184,7 @@ def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
     d2, pdf = hg_sample(g, wi, _u(S, j, D_BSDF_U1), _u(S, j, D_BSDF_U2))
     if not pdf > 0.0:
         return
-    _set3(S, R_PP, j, p)
+    set3(S, R_PP, j, p)
     S[R_PPDF * PK + j] = pdf
     Q[Q_DELTA * PK + j] = 0
     alive, beta = roulette(beta, S[R_ETA * PK + j], depth, rr_depth, _u(S, j, D_RR))
@@ -196,10 +196,10 @@ def _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth):
 def _next_ray(S, Q, j, o, d, beta, bounce):
     """Lane j's next segment: after a vertex (``bounce``: the next random-number block) or a null
     interface (the same flight goes on)."""
-    _set3(S, R_O, j, o)
-    _set3(S, R_O + 3, j, d)
+    set3(S, R_O, j, o)
+    set3(S, R_O + 3, j, d)
     S[(R_O + 6) * PK + j] = math.inf
-    _set3(S, R_BETA, j, beta)
+    set3(S, R_BETA, j, beta)
     Q[Q_SEG * PK + j] += 1
     if bounce:
         Q[Q_B * PK + j] += 1
@@ -211,16 +211,16 @@ def _next_ray(S, Q, j, o, d, beta, bounce):
 def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     """The surface reached: emission, a null interface passed, or next-event estimate and BSDF sample."""
     p, ng, ns = surface(sa.prims, sa.prim_info, prim, o, d, t, S[S_U * PK + j], S[S_V * PK + j])
-    beta = _get3(S, R_BETA, j)
+    beta = get3(S, R_BETA, j)
     em = sa.prim_info[prim, INFO_EMITTER]
     if em >= 0:
         le = eval_emitter(sa.emitters, em, ns, d)
         if le[0] + le[1] + le[2] > 0.0:
             w = 1.0
             if Q[Q_DELTA * PK + j] == 0:
-                w = power_heuristic(S[R_PPDF * PK + j], emitter_pdf(sa.emitters, em, _get3(S, R_PP, j), p, ns))
-            L = _get3(S, R_L, j)
-            _set3(S, R_L, j, (L[0] + beta[0] * le[0] * w, L[1] + beta[1] * le[1] * w, L[2] + beta[2] * le[2] * w))
+                w = power_heuristic(S[R_PPDF * PK + j], emitter_pdf(sa.emitters, em, get3(S, R_PP, j), p, ns))
+            L = get3(S, R_L, j)
+            set3(S, R_L, j, (L[0] + beta[0] * le[0] * w, L[1] + beta[1] * le[1] * w, L[2] + beta[2] * le[2] * w))
     mat = sa.materials[sa.prim_info[prim, INFO_MAT]]
     if bsdf_is_null(mat):                   # index-matched interface: not a bounce, not a vertex
         Q[Q_MED * PK + j] = next_medium(sa.prim_info, prim, medium, d, ng)
@@ -245,7 +245,7 @@ def _surface_vertex(sa, S, Q, j, o, d, t, prim, medium, max_depth, rr_depth):
     S[R_ETA * PK + j] = eta
     d2 = to_world(wo, s, tt, ns)
     Q[Q_MED * PK + j] = next_medium(sa.prim_info, prim, medium, d2, ng)
-    _set3(S, R_PP, j, p)
+    set3(S, R_PP, j, p)
     S[R_PPDF * PK + j] = pdf
     Q[Q_DELTA * PK + j] = np.int64(is_delta)
     Q[Q_DEPTH * PK + j] = depth + 1
@@ -264,14 +264,14 @@ def _shade(sa, S, Q, j, max_depth, rr_depth):
         return
     prim = Q[Q_PRIM * PK + j]
     t = S[(R_O + 6) * PK + j] if prim >= 0 else math.inf      # a miss: the scalar traversal's t
-    o, d = _get3(S, R_O, j), _get3(S, R_O + 3, j)
+    o, d = get3(S, R_O, j), get3(S, R_O + 3, j)
     medium = Q[Q_MED * PK + j]
     if medium >= 0:
         sig, alb, g = medium_params(sa.media[medium])
         ts, scattered, w = sample_distance(sig, alb, t, _u(S, j, D_MED_CH), _u(S, j, D_MED_T))
         Q[Q_J * PK + j] += 1                # the flight's next medium, if any, draws other numbers
-        beta = _get3(S, R_BETA, j)
-        _set3(S, R_BETA, j, (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]))
+        beta = get3(S, R_BETA, j)
+        set3(S, R_BETA, j, (beta[0] * w[0], beta[1] * w[1], beta[2] * w[2]))
         if scattered:
             _medium_vertex(sa, S, Q, j, o, d, ts, g, medium, max_depth, rr_depth)
             return
@@ -296,8 +296,8 @@ def _shadow(sa, S, Q, j, stack):
         return
     tr = (1.0, 1.0, 1.0)
     if nee == 1:
-        q = _get3(S, R_Q, j)
-        o, d, remaining = _get3(S, R_SO, j), _get3(S, R_SO + 3, j), S[R_REM * PK + j]
+        q = get3(S, R_Q, j)
+        o, d, remaining = get3(S, R_SO, j), get3(S, R_SO + 3, j), S[R_REM * PK + j]
         medium = Q[Q_SMED * PK + j]
         prim = Q[Q_PRIM * PK + j]
         t = S[(R_SO + 6) * PK + j] if prim >= 0 else math.inf
@@ -307,10 +307,10 @@ def _shadow(sa, S, Q, j, stack):
             tr = _march_on(sa, o, d, remaining, q, medium, tr, stack)
     if tr[0] == 0.0 and tr[1] == 0.0 and tr[2] == 0.0:
         return
-    w_em = _get3(S, R_WEM, j)
+    w_em = get3(S, R_WEM, j)
     wl = (w_em[0] * tr[0], w_em[1] * tr[1], w_em[2] * tr[2])
-    a, k, L = _get3(S, R_A, j), S[R_K * PK + j], _get3(S, R_L, j)
-    _set3(S, R_L, j, (L[0] + a[0] * wl[0] * k, L[1] + a[1] * wl[1] * k, L[2] + a[2] * wl[2] * k))
+    a, k, L = get3(S, R_A, j), S[R_K * PK + j], get3(S, R_L, j)
+    set3(S, R_L, j, (L[0] + a[0] * wl[0] * k, L[1] + a[1] * wl[1] * k, L[2] + a[2] * wl[2] * k))
 
 
 @leaf

@@ -27,6 +27,7 @@ from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.rng import rand
 from gdlearn.integrators.path import packet as surface_packet
 from gdlearn.integrators.path.packet import render_row_packet
+from gdlearn.integrators.path.packet_rows import new_buffers
 from gdlearn.integrators.path import packet_volume as volume_packet
 from gdlearn.integrators.path.packet_volume import render_row_packet_volume
 from gdlearn.integrators.path.surface import radiance_path_inline
@@ -97,7 +98,7 @@ def _rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter,
     sa = borrowed(sa)
     h = out.shape[0]
     stack = np.empty(STACK_SIZE, dtype=np.int32)
-    S, Q, buf, items = surface_packet.new_buffers()
+    S, Q, buf, items = new_buffers()
     acc = np.zeros((out.shape[1], 3))
     while True:
         y0, y1 = next_rows(counter, step, h)
@@ -118,7 +119,7 @@ def render_rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, mask,
 def _rows_packet_volume(sa, seed, sample0, spp, max_depth, rr_depth, out, bad, counter, step):
     sa = borrowed(sa)
     stack = np.empty(STACK_SIZE, dtype=np.int32)
-    _, _, buf, items = surface_packet.new_buffers()
+    _, _, buf, items = new_buffers()
     S, Q = volume_packet.new_buffers()
     acc = np.zeros((out.shape[1], 3))
     while True:
