@@ -62,9 +62,11 @@ def test_twosided_and_rr_depth():
 
 def test_twosided_faces_seen_from_behind():
     # every face but the light's flipped, so each vertex is shaded from its back: the twosided
-    # mirroring of wi and wo in the deferred diffuse next-event estimates (packet_nee), which the
-    # closed box above never reaches (its rays meet front sides only). Leaving the mirroring out of
-    # nee_diffuse_area fails this test and no other of this file.
+    # mirroring of wi and wo in the SIMD loops over diffuse lanes (packet_nee.nee_diffuse_area,
+    # packet.next_diffuse), which the closed box above mostly misses (its rays meet front sides; the
+    # light's back only through the gap under the ceiling). Leaving the mirroring out of
+    # nee_diffuse_area fails this test and no other of this file; out of next_diffuse, this one and
+    # test_twosided_and_rr_depth.
     scene = copy.deepcopy(cornell_box(res=20))
     for sh in scene.shapes:
         sh.bsdf.twosided = True

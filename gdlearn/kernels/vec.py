@@ -61,6 +61,19 @@ def normalize(a):
 
 
 @inlined
+def fmin(a, b):
+    """min(a, b) as a select, ``a`` unless b < a (Python's min): written out, since the builtin
+    min/max are calls numba does not always inline, and a select lets a loop be vectorised."""
+    return b if b < a else a
+
+
+@inlined
+def fmax(a, b):
+    """max(a, b) as a select, ``a`` unless b > a (Python's max); see :func:`fmin`."""
+    return b if b > a else a
+
+
+@inlined
 def max3(a):
     return max(a[0], max(a[1], a[2]))
 

@@ -21,9 +21,9 @@ tracks no path classes: with nothing to drop, every contribution counts). Everyt
 with :mod:`gdlearn.integrators.path.surface`. Rays are traced as a packet when the scene is one leaf
 (the Cornell box, the glossy box, the glass and mirror spheres of the caustic scenes), else ray by
 ray with the scalar traversal (trees: incoherent rays through a tree share too few nodes for a
-packet to pay), and still gain from the lanes' overlap. The next-event estimates of diffuse
-vertices run SIMD over the lanes too (:mod:`gdlearn.integrators.path.packet_nee`); the lanes' state
-is laid out in :mod:`gdlearn.integrators.path.packet_rows`.
+packet to pay), and still gain from the lanes' overlap. The next-event estimates and BSDF samples
+of diffuse vertices run SIMD over the lanes too (:mod:`gdlearn.integrators.path.packet_nee`,
+:func:`next_diffuse`); the lanes' state is laid out in :mod:`gdlearn.integrators.path.packet_rows`.
 """
 import math
 
@@ -32,9 +32,9 @@ import numpy as np
 
 from gdlearn.integrators.path.packet_nee import defer_diffuse_area, nee_diffuse_area, nee_lane
 from gdlearn.integrators.path.packet_rows import (IT_FX, IT_FY, IT_KEY, IT_S, Q_ALIVE, Q_CONT, Q_DELTA, Q_DEPTH,
-                                                  Q_EMP, Q_H, Q_ITEM, Q_MAT, Q_NEE, R_BETA, R_C, R_ETA, R_FS, R_FT,
-                                                  R_L, R_NG, R_NS, R_O, R_P, R_PP, R_PPDF, R_SO, R_UBSDF, R_UEM,
-                                                  R_URR, R_WI, R_WO, get3, set3)
+                                                  Q_DIFF, Q_EMP, Q_H, Q_ITEM, Q_MAT, Q_NEE, R_BETA, R_C, R_ETA, R_FS,
+                                                  R_FT, R_L, R_M2S, R_MREF, R_NG, R_NS, R_O, R_P, R_PP, R_PPDF, R_SO,
+                                                  R_UBSDF, R_UEM, R_URR, R_WI, R_WO, get3, set3, set_if)
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
 from gdlearn.kernels.accel.packet import PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
@@ -48,7 +48,7 @@ from gdlearn.kernels.pathclass import (CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT
                                        MEDIA_TRANSPORT, SPECULAR, SURFACE_TRANSPORT)
 from gdlearn.kernels.rng import path_state, rand, rand_at
 from gdlearn.kernels.sampling import INV_PI, power_heuristic, square_to_cosine_hemisphere
-from gdlearn.kernels.vec import coordinate_system, max3, to_local, to_world
+from gdlearn.kernels.vec import coordinate_system, fmax, fmin, max3, to_local, to_world
 
 
 def eligible(sa, mask, max_depth, possible) -> bool:
@@ -114,16 +114,61 @@ def _draw(S, Q):
 
 
 @leaf
-def _diffuse_sample(mat, wi, wo):
-    """``bsdf.bsdf_sample`` of a diffuse material, given the cosine-weighted direction ``wo`` its
-    (u1, u2) map to: the same twosided mirroring, checks and guard (so the same bits)."""
-    flip = mat[MAT_TWOSIDED] != 0.0 and wi[2] < 0.0
-    wz = -wi[2] if flip else wi[2]
-    pdf = wo[2] * INV_PI
-    w = (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2])
-    if wz <= 0.0 or pdf <= 0.0 or not (pdf < math.inf and abs(w[0] + w[1] + w[2]) < math.inf):
-        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, False
-    return (wo[0], wo[1], -wo[2] if flip else wo[2]), w, pdf, False
+def next_diffuse(S, Q, rr_depth):
+    """:func:`_shade_next` for every diffuse lane (Q_DIFF) in one branch-free loop the compiler
+    vectorises: ``bsdf_sample`` of a diffuse material given the cosine-weighted direction its
+    (u1, u2) map to (R_WO, from :func:`_draw`), with the twosided mirroring, checks and guard; the
+    next ray (``offset_origin``), and the Russian roulette. The scalar code's operations in its order,
+    each branch a select, so the same bits; a diffuse BSDF crosses no interface (``bsdf_eta`` 1: eta
+    is kept) and is not a delta."""
+    for j in range(PK):
+        wiz = S[(R_WI + 2) * PK + j]
+        flip = (S[R_M2S * PK + j] != 0.0) & (wiz < 0.0)
+        wz = -wiz if flip else wiz
+        w0, w1, w2 = S[R_WO * PK + j], S[(R_WO + 1) * PK + j], S[(R_WO + 2) * PK + j]
+        pdf = w2 * INV_PI
+        r0, r1, r2 = S[R_MREF * PK + j], S[(R_MREF + 1) * PK + j], S[(R_MREF + 2) * PK + j]
+        valid = (not ((wz <= 0.0) | (pdf <= 0.0))) & (pdf < math.inf) & (abs(r0 + r1 + r2) < math.inf)
+        go = (Q[Q_DIFF * PK + j] != 0) & valid
+        w2 = -w2 if flip else w2
+        b0, b1, b2 = S[R_BETA * PK + j] * r0, S[(R_BETA + 1) * PK + j] * r1, S[(R_BETA + 2) * PK + j] * r2
+        s0, s1, s2 = S[R_FS * PK + j], S[(R_FS + 1) * PK + j], S[(R_FS + 2) * PK + j]
+        t0, t1, t2 = S[R_FT * PK + j], S[(R_FT + 1) * PK + j], S[(R_FT + 2) * PK + j]
+        n0, n1, n2 = S[R_NS * PK + j], S[(R_NS + 1) * PK + j], S[(R_NS + 2) * PK + j]
+        d0 = s0 * w0 + t0 * w1 + n0 * w2
+        d1 = s1 * w0 + t1 * w1 + n1 * w2
+        d2 = s2 * w0 + t2 * w1 + n2 * w2
+        px, py, pz = S[R_P * PK + j], S[(R_P + 1) * PK + j], S[(R_P + 2) * PK + j]
+        gx, gy, gz = S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j]
+        eps = 1e-9 * fmax(abs(px), fmax(abs(py), abs(pz))) + 1e-7
+        eps = -eps if d0 * gx + d1 * gy + d2 * gz < 0.0 else eps
+        set_if(S, R_O, j, go, px + eps * gx)
+        set_if(S, R_O + 1, j, go, py + eps * gy)
+        set_if(S, R_O + 2, j, go, pz + eps * gz)
+        set_if(S, R_O + 3, j, go, d0)
+        set_if(S, R_O + 4, j, go, d1)
+        set_if(S, R_O + 5, j, go, d2)
+        set_if(S, R_O + 6, j, go, math.inf)
+        set_if(S, R_PP, j, go, px)
+        set_if(S, R_PP + 1, j, go, py)
+        set_if(S, R_PP + 2, j, go, pz)
+        set_if(S, R_PPDF, j, go, pdf)
+        Q[Q_DELTA * PK + j] = 0 if go else Q[Q_DELTA * PK + j]
+        depth = Q[Q_DEPTH * PK + j] + 1
+        Q[Q_DEPTH * PK + j] = depth if go else Q[Q_DEPTH * PK + j]
+        bmax = fmax(b0, fmax(b1, b2))
+        eta = S[R_ETA * PK + j]
+        q = fmin(bmax * eta * eta, 0.95)
+        roulette = depth >= rr_depth
+        survive = (not roulette) | (S[R_URR * PK + j] < q)
+        b0 = b0 / q if roulette else b0
+        b1 = b1 / q if roulette else b1
+        b2 = b2 / q if roulette else b2
+        alive = go & survive & (bmax > 0.0)
+        set_if(S, R_BETA, j, alive, b0)
+        set_if(S, R_BETA + 1, j, alive, b1)
+        set_if(S, R_BETA + 2, j, alive, b2)
+        Q[Q_ALIVE * PK + j] = 1 if alive else Q[Q_ALIVE * PK + j]
 
 
 @ir_inline
@@ -150,6 +195,7 @@ def _shade_hit(sa, S, Q, j, max_depth):
     Q[Q_NEE * PK + j] = 0
     Q[Q_CONT * PK + j] = 0
     Q[Q_EMP * PK + j] = -1
+    Q[Q_DIFF * PK + j] = 0
     S[(R_SO + 6) * PK + j] = -1.0
     prim = Q[Q_PRIM * PK + j]
     if Q[Q_ITEM * PK + j] < 0 or prim < 0:          # idle, or escaped (no environment)
@@ -166,8 +212,13 @@ def _shade_hit(sa, S, Q, j, max_depth):
     set3(S, R_NS, j, ns)
     set3(S, R_FS, j, s)
     set3(S, R_FT, j, tt)
-    Q[Q_MAT * PK + j] = sa.prim_info[prim, INFO_MAT]
+    m = sa.prim_info[prim, INFO_MAT]
+    Q[Q_MAT * PK + j] = m
     Q[Q_CONT * PK + j] = 1
+    if sa.materials[m, MAT_TYPE] == DIFFUSE:       # for the SIMD loops: next_diffuse, nee_diffuse_area
+        Q[Q_DIFF * PK + j] = 1
+        set3(S, R_MREF, j, (sa.materials[m, MAT_R], sa.materials[m, MAT_R + 1], sa.materials[m, MAT_R + 2]))
+        S[R_M2S * PK + j] = sa.materials[m, MAT_TWOSIDED]
 
 
 @leaf
@@ -184,16 +235,14 @@ def _shade_nee(sa, S, Q, j):
 
 @leaf
 def _shade_next(sa, S, Q, j, rr_depth):
-    """Lane j's BSDF sample, next ray and Russian roulette; Q_ALIVE says whether the path goes on."""
-    if Q[Q_CONT * PK + j] == 0:
+    """Lane j's BSDF sample, next ray and Russian roulette; Q_ALIVE says whether the path goes on.
+    A diffuse vertex's is :func:`next_diffuse`'s, for all such lanes at once."""
+    if Q[Q_CONT * PK + j] == 0 or Q[Q_DIFF * PK + j] != 0:
         return
     mat = sa.materials[Q[Q_MAT * PK + j]]
     wi = get3(S, R_WI, j)
-    if mat[MAT_TYPE] == DIFFUSE:
-        wo, weight, pdf, is_delta = _diffuse_sample(mat, wi, get3(S, R_WO, j))
-    else:
-        u = get3(S, R_UBSDF, j)
-        wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u[0], u[1], u[2])
+    u = get3(S, R_UBSDF, j)
+    wo, weight, pdf, is_delta = bsdf_sample(mat, wi, u[0], u[1], u[2])
     if not pdf > 0.0:
         return
     beta = get3(S, R_BETA, j)
@@ -287,9 +336,9 @@ def trace_items(sa, items, nitems, seed, max_depth, rr_depth, S, Q, buf, stack):
         for j in range(PK):
             _shade_hit(sa, S, Q, j, max_depth)
             _shade_nee(sa, S, Q, j)
-        nee_diffuse_area(S, Q)             # the deferred estimates read beta before _shade_next
-        for j in range(PK):
             _shade_next(sa, S, Q, j, rr_depth)
+        nee_diffuse_area(S, Q)             # the deferred estimates read beta before next_diffuse
+        next_diffuse(S, Q, rr_depth)
         _trace(sa, S, Q, R_SO, stack, True)
         nxt, busy = _finish(sa, S, Q, buf, nxt, nitems, items, seed)
 

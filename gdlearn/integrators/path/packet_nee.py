@@ -10,23 +10,26 @@ AVX-512): the square roots and divisions of 8 lanes in one instruction each. Wri
 (each branch a select) with the scalar functions' operations in their order, it gives the bits of
 ``sample_emitter``, ``bsdf_eval``, ``bsdf_pdf``, ``power_heuristic`` and ``shadow_ray``
 (tests/test_pt_packet.py: the image equals the one-path kernel's bit for bit). Other lanes take the
-scalar :func:`nee_lane`. benchmarks/README.md, "Next-event estimates in SIMD".
+scalar :func:`nee_lane`. Why a loop of its own: LLVM vectorises a loop over the lanes only when
+it reads and writes the rows of ``S`` and ``Q`` alone (constant row offsets, no aliasing to prove);
+reading the scene's arrays in it (gathers) left it scalar. benchmarks/README.md, "The diffuse
+lanes in SIMD".
 """
 import math
 
 from gdlearn.integrators.path.packet_rows import (Q_EMP, Q_NEE, R_BETA, R_C, R_ENG, R_EP0, R_EPA, R_ERGB, R_M2S,
-                                                  R_MREF, R_NG, R_NS, R_P, R_SO, R_UEM, R_WI, set3)
-from gdlearn.kernels.accel.bvh import _fmax
+                                                  R_MREF, R_NG, R_NS, R_P, R_SO, R_UEM, R_WI, set3,
+                                                  set_if)
 from gdlearn.kernels.accel.packet import PK
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
 from gdlearn.kernels.geometry import G_HASN, G_NG, INFO_TYPE, P_TRIANGLE
 from gdlearn.kernels.jit import ir_inline, leaf
-from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE
+from gdlearn.kernels.layout import DIFFUSE, MAT_TYPE
 from gdlearn.kernels.lights import (E_AREA, EM_AREA, EM_COUNT, EM_FIRST, EM_RGB, EM_TYPE, pick_emitter, pick_prim,
                                     sample_emitter)
 from gdlearn.kernels.sampling import INV_PI, power_heuristic
 from gdlearn.kernels.scene_query import SHADOW_EPS, shadow_ray
-from gdlearn.kernels.vec import to_local
+from gdlearn.kernels.vec import fmax, to_local
 
 
 @ir_inline
@@ -57,8 +60,9 @@ def nee_lane(sa, S, Q, j, p, ng, frame, wi, mat, beta):
 def defer_diffuse_area(sa, S, Q, j, mat):
     """Defer lane j's next-event estimate to :func:`nee_diffuse_area` when its vertex is diffuse and
     its emitter sample falls on an area emitter's triangle (flat: no vertex normals): gather the
-    triangle, the emitter's rgb and area pdf (``sample_emitter``'s ``sel / A``), and the material's
-    reflectance and twosided flag into the lane's rows. Returns whether it did."""
+    triangle, the emitter's rgb and area pdf (``sample_emitter``'s ``sel / A``) into the lane's rows
+    (the material's, R_MREF and R_M2S, are the vertex's: ``packet._shade_hit``). Returns whether it
+    did."""
     if mat[MAT_TYPE] != DIFFUSE:
         return False
     em, u_rest = pick_emitter(sa.emitters, S[R_UEM * PK + j])
@@ -73,8 +77,6 @@ def defer_diffuse_area(sa, S, Q, j, mat):
     set3(S, R_ENG, j, (sa.prims[prim, G_NG], sa.prims[prim, G_NG + 1], sa.prims[prim, G_NG + 2]))
     set3(S, R_ERGB, j, (sa.emitters[em, EM_RGB], sa.emitters[em, EM_RGB + 1], sa.emitters[em, EM_RGB + 2]))
     S[R_EPA * PK + j] = (1.0 / sa.emitters.shape[0]) / sa.emitters[em, EM_AREA]
-    set3(S, R_MREF, j, (mat[MAT_R], mat[MAT_R + 1], mat[MAT_R + 2]))
-    S[R_M2S * PK + j] = mat[MAT_TWOSIDED]
     return True
 
 
@@ -123,7 +125,7 @@ def nee_diffuse_area(S, Q):
         ok = fast & (dist2 != 0.0) & (cos_q > 0.0) & ((fx != 0.0) | (fy != 0.0) | (fz != 0.0))
         # shadow_ray from the vertex pushed off its surface (offset_origin) to q
         nx, ny, nz = S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j]
-        eps = 1e-9 * _fmax(abs(px), _fmax(abs(py), abs(pz))) + 1e-7
+        eps = 1e-9 * fmax(abs(px), fmax(abs(py), abs(pz))) + 1e-7
         eps = -eps if vx * nx + vy * ny + vz * nz < 0.0 else eps
         has_n = (nx != 0.0) | (ny != 0.0) | (nz != 0.0)
         ox = px + eps * nx if has_n else px
@@ -136,19 +138,14 @@ def nee_diffuse_area(S, Q):
         c0 = fx * (S[R_ERGB * PK + j] * inv_pdf) * w
         c1 = fy * (S[(R_ERGB + 1) * PK + j] * inv_pdf) * w
         c2 = fz * (S[(R_ERGB + 2) * PK + j] * inv_pdf) * w
-        _sel(S, R_C, j, ok, S[R_BETA * PK + j] * c0)
-        _sel(S, R_C + 1, j, ok, S[(R_BETA + 1) * PK + j] * c1)
-        _sel(S, R_C + 2, j, ok, S[(R_BETA + 2) * PK + j] * c2)
-        _sel(S, R_SO, j, ok, ox)
-        _sel(S, R_SO + 1, j, ok, oy)
-        _sel(S, R_SO + 2, j, ok, oz)
-        _sel(S, R_SO + 3, j, ok, sx * sinv if sdist != 0.0 else 0.0)
-        _sel(S, R_SO + 4, j, ok, sy * sinv if sdist != 0.0 else 0.0)
-        _sel(S, R_SO + 5, j, ok, sz * sinv if sdist != 0.0 else 1.0)
-        _sel(S, R_SO + 6, j, ok, tmax if (sdist != 0.0) & (tmax > 0.0) else -1.0)
+        set_if(S, R_C, j, ok, S[R_BETA * PK + j] * c0)
+        set_if(S, R_C + 1, j, ok, S[(R_BETA + 1) * PK + j] * c1)
+        set_if(S, R_C + 2, j, ok, S[(R_BETA + 2) * PK + j] * c2)
+        set_if(S, R_SO, j, ok, ox)
+        set_if(S, R_SO + 1, j, ok, oy)
+        set_if(S, R_SO + 2, j, ok, oz)
+        set_if(S, R_SO + 3, j, ok, sx * sinv if sdist != 0.0 else 0.0)
+        set_if(S, R_SO + 4, j, ok, sy * sinv if sdist != 0.0 else 0.0)
+        set_if(S, R_SO + 5, j, ok, sz * sinv if sdist != 0.0 else 1.0)
+        set_if(S, R_SO + 6, j, ok, tmax if (sdist != 0.0) & (tmax > 0.0) else -1.0)
         Q[Q_NEE * PK + j] = 1 if ok else Q[Q_NEE * PK + j]
-
-
-@leaf
-def _sel(S, r, j, ok, v):
-    S[r * PK + j] = v if ok else S[r * PK + j]

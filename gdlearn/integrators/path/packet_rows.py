@@ -26,22 +26,24 @@ R_URR = R_WO + 3        # its Russian-roulette number
 R_UBSDF = R_URR + 1     # 3: its BSDF sample's numbers (lobe, direction) for other BSDFs than diffuse
 # the vertex: point, normals, shading frame, wi (local)
 R_P, R_NG, R_NS, R_FS, R_FT, R_WI = (R_UBSDF + 3 + 3 * k for k in range(6))
+# a diffuse vertex's material, gathered for the SIMD loops over the lanes: reflectance, twosided flag
+R_MREF = R_WI + 3
+R_M2S = R_MREF + 3
 # a diffuse lane's area-emitter sample, gathered for packet_nee.nee_diffuse_area: the triangle's p0,
-# e1, e2, its normal, the emitter's rgb, its area pdf, the material's reflectance and twosided flag
-R_EP0 = R_WI + 3
+# e1, e2, its normal, the emitter's rgb, its area pdf
+R_EP0 = R_M2S + 1
 R_ENG = R_EP0 + 9
 R_ERGB = R_ENG + 3
 R_EPA = R_ERGB + 3
-R_MREF = R_EPA + 1
-R_M2S = R_MREF + 3
-N_S = R_M2S + 1
+N_S = R_EPA + 1
 # int rows (after the traversal's): path state, bounce, item (-1: idle lane), previous vertex delta,
 # path goes on after this bounce, a next-event term is pending
 Q_H = N_Q_TRACE
 Q_DEPTH, Q_ITEM, Q_DELTA, Q_ALIVE, Q_NEE = Q_H + 1, Q_H + 2, Q_H + 3, Q_H + 4, Q_H + 5
 Q_MAT, Q_CONT = Q_H + 6, Q_H + 7        # the vertex's material row; the bounce scatters at the vertex
 Q_EMP = Q_H + 8                         # a deferred next-event estimate's triangle (-1: none)
-N_Q = Q_EMP + 1
+Q_DIFF = Q_H + 9                        # the vertex is diffuse: its BSDF sample is deferred
+N_Q = Q_DIFF + 1
 
 #: items (pixel, sample) whose radiance a row keeps before summing them per pixel
 N_ITEMS = 4096
@@ -68,3 +70,10 @@ def get3(S, r, j):
 @leaf
 def set3(S, r, j, v):
     S[r * PK + j], S[(r + 1) * PK + j], S[(r + 2) * PK + j] = v[0], v[1], v[2]
+
+
+@leaf
+def set_if(S, r, j, ok, v):
+    """Row r of lane j becomes v where ``ok``, else stays: a select and a store, no branch (the SIMD
+    loops over the lanes)."""
+    S[r * PK + j] = v if ok else S[r * PK + j]

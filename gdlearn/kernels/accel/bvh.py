@@ -42,6 +42,7 @@ from gdlearn.kernels.geometry import INFO_MAT, INFO_TYPE, intersect_prim
 from gdlearn.kernels.accel.simd import block4, block8, children8, sort8
 from gdlearn.kernels.layout import MAT_TYPE, NULL
 from gdlearn.kernels.jit import inlined, leaf, noalloc
+from gdlearn.kernels.vec import fmax, fmin
 
 #: traversal stack entries: int64 child keys (two int32 entries each); a wide node pushes at most
 #: 7, and the build checks that 7 per level of its tree (plus the 8 a push writes) fit
@@ -114,17 +115,6 @@ def _f64_bits(typingctx, x):
 
 
 @inlined
-def _fmin(a, b):
-    # written out: the builtin min/max are calls numba does not always inline
-    return b if b < a else a
-
-
-@inlined
-def _fmax(a, b):
-    return b if b > a else a
-
-
-@inlined
 def _box_hit(nodes, off, c, o, inv, tmin, tmax):
     """Slab test of child c of the wide node whose block starts at ``off``; returns the entry
     distance or inf. :func:`gdlearn.kernels.accel.simd.children8` does this for 8 children at once."""
@@ -136,8 +126,8 @@ def _box_hit(nodes, off, c, o, inv, tmin, tmax):
     tz0 = (nodes[b + 2 * WIDE] - o[2]) * inv[2]
     tz1 = (nodes[b + 5 * WIDE] - o[2]) * inv[2]
     # per axis the near and far slab; a NaN (0 * inf: origin on a slab, ray parallel) is ignored
-    lo = _fmax(_fmax(_fmin(t0, t1), _fmin(ty0, ty1)), _fmax(_fmin(tz0, tz1), tmin))
-    hi = _fmin(_fmin(_fmax(t0, t1), _fmax(ty0, ty1)), _fmin(_fmax(tz0, tz1), tmax)) * 1.0000000000000004
+    lo = fmax(fmax(fmin(t0, t1), fmin(ty0, ty1)), fmax(fmin(tz0, tz1), tmin))
+    hi = fmin(fmin(fmax(t0, t1), fmax(ty0, ty1)), fmin(fmax(tz0, tz1), tmax)) * 1.0000000000000004
     if lo <= hi:                                                           # 2 ulp: no leaks at box faces
         return lo
     return math.inf

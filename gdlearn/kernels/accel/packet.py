@@ -25,10 +25,11 @@ import math
 import numpy as np
 
 
-from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits, _fmax, _fmin
+from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
 from gdlearn.kernels.geometry import INFO_TYPE, P_SPHERE, intersect_disk, intersect_sphere
 from gdlearn.kernels.jit import leaf
+from gdlearn.kernels.vec import fmax, fmin
 
 #: rays per packet (64 float64 per row: 8 AVX-512 vectors)
 PK = 64
@@ -152,8 +153,8 @@ def _box_any(nodes, b, S, Q, ro, any_hit):
         t0, t1 = (lx - ox) * ix, (hx - ox) * ix
         ty0, ty1 = (ly - oy) * iy, (hy - oy) * iy
         tz0, tz1 = (lz - oz) * iz, (hz - oz) * iz
-        lo = _fmax(_fmax(_fmin(t0, t1), _fmin(ty0, ty1)), _fmax(_fmin(tz0, tz1), 0.0))
-        hi = _fmin(_fmin(_fmax(t0, t1), _fmax(ty0, ty1)), _fmin(_fmax(tz0, tz1), S[(ro + 6) * PK + j]))
+        lo = fmax(fmax(fmin(t0, t1), fmin(ty0, ty1)), fmax(fmin(tz0, tz1), 0.0))
+        hi = fmin(fmin(fmax(t0, t1), fmax(ty0, ty1)), fmin(fmax(tz0, tz1), S[(ro + 6) * PK + j]))
         looking = (Q[Q_HIT * PK + j] == 0) if any_hit else True
         hit |= np.int64((lo <= hi * 1.0000000000000004) & looking)
     return hit != 0
