@@ -21,7 +21,7 @@ from gdlearn.integrators.path.packet_rows import (Q_EMP, Q_NEE, R_BETA, R_C, R_E
                                                   R_MREF, R_NG, R_NS, R_P, R_SO, R_UEM, R_WI, set3,
                                                   set_if)
 from gdlearn.kernels.accel.packet import PK
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
+from gdlearn.kernels.bsdf.dispatch import bsdf_eval_pdf
 from gdlearn.kernels.geometry import G_HASN, G_NG, INFO_TYPE, P_TRIANGLE
 from gdlearn.kernels.jit import ir_inline, leaf
 from gdlearn.kernels.layout import DIFFUSE, MAT_TYPE
@@ -43,11 +43,11 @@ def nee_lane(sa, S, Q, j, p, ng, frame, wi, mat, beta):
     if em < 0:
         return
     wo = to_local(dl, s, t, n)
-    f = bsdf_eval(mat, wi, wo)
+    f, pdf_b = bsdf_eval_pdf(mat, wi, wo)
     if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
         return
     o, d, tmax = shadow_ray(p, ng, q)
-    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))   # nee_class_share: 1
+    w = 1.0 if delta else power_heuristic(pdf_em, pdf_b)   # nee_class_share: 1
     c = (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
     set3(S, R_C, j, (beta[0] * c[0], beta[1] * c[1], beta[2] * c[2]))
     set3(S, R_SO, j, o)

@@ -34,7 +34,7 @@ next-event estimator into the bounce loop (a call passes the scene's arrays as ~
 import math
 
 
-from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
+from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval_pdf, bsdf_is_delta_only, bsdf_is_null, bsdf_sample,
                    nee_class_share, nee_classes, sampled_lobe_class)
 from gdlearn.kernels.accel.bvh import closest_hit_inline
 from gdlearn.kernels.camera import camera_ray
@@ -84,12 +84,12 @@ def nee_surface(sa, p, ng, ns_frame, wi, mat, h, bounce, stack, want_coat=True, 
     if em < 0:
         return (0.0, 0.0, 0.0)
     wo = to_local(dl, s, t, n)
-    f = bsdf_eval(mat, wi, wo)
+    f, pdf_b = bsdf_eval_pdf(mat, wi, wo)
     if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
         return (0.0, 0.0, 0.0)
     if occluded(sa, p, ng, q, stack):
         return (0.0, 0.0, 0.0)
-    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+    w = 1.0 if delta else power_heuristic(pdf_em, pdf_b)
     w *= nee_class_share(mat, wi, wo, want_coat, want_rest)
     return (f[0] * w_em[0] * w, f[1] * w_em[1] * w, f[2] * w_em[2] * w)
 

@@ -35,7 +35,8 @@ from gdlearn.kernels.bsdf.dielectric import (dielectric_sample, roughdielectric_
 from gdlearn.kernels.bsdf.diffuse import diffuse_eval, diffuse_pdf, diffuse_sample
 from gdlearn.kernels.bsdf.plastic import (ROUGHPLASTIC_WIDTH, plastic_eval, plastic_pdf, plastic_sample,
                                           prepare_plastic, roughplastic_coat_fraction, roughplastic_eval,
-                                          roughplastic_pdf, roughplastic_sample, roughplastic_spec_prob)
+                                          roughplastic_eval_pdf, roughplastic_pdf, roughplastic_sample,
+                                          roughplastic_spec_prob)
 from gdlearn.kernels.jit import INLINED_OPTIONS, block, inlined
 from gdlearn.kernels.bsdf.tiers import tier_of
 
@@ -222,6 +223,47 @@ def bsdf_pdf(mat, wi, wo):
     if _flips(mat, wi):
         return _pdf_front(mat, (wi[0], wi[1], -wi[2]), (wo[0], wo[1], -wo[2]))
     return _pdf_front(mat, wi, wo)
+
+
+_eval_all_inlined = inlined(_eval_front_all)
+_pdf_all_inlined = inlined(_pdf_front_all)
+
+
+def _eval_pdf_lean(mat, wi, wo):
+    if int(mat[L.MAT_TYPE]) == L.DIFFUSE:
+        return diffuse_eval(mat, wi, wo), diffuse_pdf(mat, wi, wo)
+    return ZERO3, 0.0
+
+
+def _eval_pdf_glossy(mat, wi, wo):
+    if int(mat[L.MAT_TYPE]) == L.ROUGHPLASTIC:
+        return roughplastic_eval_pdf(mat, wi, wo)
+    return _eval_glossy_inlined(mat, wi, wo), _pdf_glossy_inlined(mat, wi, wo)
+
+
+def _eval_pdf_front_all(mat, wi, wo):
+    if int(mat[L.MAT_TYPE]) == L.ROUGHPLASTIC:
+        return roughplastic_eval_pdf(mat, wi, wo)
+    return _eval_all_inlined(mat, wi, wo), _pdf_all_inlined(mat, wi, wo)
+
+
+def _eval_pdf_front(mat, wi, wo):
+    _compiled_only()
+
+
+@overload(_eval_pdf_front, jit_options=INLINED_OPTIONS)
+def _eval_pdf_front_typed(mat, wi, wo):
+    return {"lean": _eval_pdf_lean, "smooth": _eval_pdf_lean, "glossy": _eval_pdf_glossy,
+            "all": _eval_pdf_front_all}[tier_of(mat)]
+
+
+@inlined
+def bsdf_eval_pdf(mat, wi, wo):
+    """(:func:`bsdf_eval`, :func:`bsdf_pdf`) at once, the same values: where a caller needs both (a
+    next-event estimate and its MIS weight), a rough plastic computes the terms they share once."""
+    if _flips(mat, wi):
+        return _eval_pdf_front(mat, (wi[0], wi[1], -wi[2]), (wo[0], wo[1], -wo[2]))
+    return _eval_pdf_front(mat, wi, wo)
 
 
 @inlined

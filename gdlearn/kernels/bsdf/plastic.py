@@ -26,7 +26,7 @@ import numpy as np
 from gdlearn.kernels.bsdf.fresnel import fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_m, refract_m
 from gdlearn.kernels.layout import (MAT_ALPHA, MAT_AUX, MAT_DIST, MAT_ETA, MAT_NONLINEAR, MAT_R, MAT_SR,
                                     MAT_TYPE, ROUGHPLASTIC)
-from gdlearn.kernels.bsdf.microfacet import mf_D, mf_G, mf_G1, mf_sample
+from gdlearn.kernels.bsdf.microfacet import mf_D, mf_G1, mf_sample
 from gdlearn.kernels.sampling import INV_PI, square_to_cosine_hemisphere
 from gdlearn.kernels.jit import block, inlined
 
@@ -127,21 +127,29 @@ def roughplastic_spec_prob(mat, cos_i):
     return _spec_prob(1.0 - rough_transmittance(mat, cos_i), mat)
 
 
-@block
-def roughplastic_eval(mat, wi, wo):
-    cos_i, cos_o = wi[2], wo[2]
-    if cos_i <= 0.0 or cos_o <= 0.0:
-        return ZERO3
-    dist, alpha, eta = int(mat[MAT_DIST]), mat[MAT_ALPHA], mat[MAT_ETA]
+@inlined
+def _rough_coat(mat, wi, wo):
+    """The coating's half vector h of wi, wo (both z > 0), D(h) and G1(wi, h): what the eval and the
+    pdf share."""
+    dist, alpha = int(mat[MAT_DIST]), mat[MAT_ALPHA]
     hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
     n = math.sqrt(hx * hx + hy * hy + hz * hz)      # > 0 since both z > 0
     h = (hx / n, hy / n, hz / n)
-    d = mf_D(dist, alpha, h)
+    return h, mf_D(dist, alpha, h), mf_G1(dist, alpha, wi, h)
+
+
+@inlined
+def _rough_f(mat, wi, wo, h, d, g1_i, t_i):
+    """f |cos wo| of the rough plastic given :func:`_rough_coat`'s h, D, G1(wi) and the external
+    transmittance t_i at wi: the coating's Fresnel-weighted microfacet term plus the base's
+    diffuse term through both interfaces."""
+    cos_i, cos_o = wi[2], wo[2]
+    eta = mat[MAT_ETA]
     spec = 0.0
     if d > 0.0:
         f = fresnel_dielectric(wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2], eta)[0]
-        spec = f * d * mf_G(dist, alpha, wi, wo, h) / (4.0 * cos_i)
-    t_i = rough_transmittance(mat, cos_i)
+        # mf_G's separable G1(wi) G1(wo), in its order
+        spec = f * d * (g1_i * mf_G1(int(mat[MAT_DIST]), mat[MAT_ALPHA], wo, h)) / (4.0 * cos_i)
     t_o = rough_transmittance(mat, cos_o)
     a = _diffuse_albedo(mat)
     s = cos_o * INV_PI / (eta * eta) * t_i * t_o
@@ -150,18 +158,42 @@ def roughplastic_eval(mat, wi, wo):
 
 
 @inlined
+def _rough_pdf_parts(d, g1_i, cos_i, cos_o, p_spec):
+    """(coating, base) parts of the pdf, lobe-selection probabilities included."""
+    spec = d * g1_i / (4.0 * cos_i)
+    return spec * p_spec, (1.0 - p_spec) * cos_o * INV_PI
+
+
+@block
+def roughplastic_eval(mat, wi, wo):
+    if wi[2] <= 0.0 or wo[2] <= 0.0:
+        return ZERO3
+    h, d, g1_i = _rough_coat(mat, wi, wo)
+    return _rough_f(mat, wi, wo, h, d, g1_i, rough_transmittance(mat, wi[2]))
+
+
+@block
+def roughplastic_eval_pdf(mat, wi, wo):
+    """(:func:`roughplastic_eval`, :func:`roughplastic_pdf`) at once, the shared terms computed once
+    (the same values: next-event estimates and :func:`roughplastic_sample` need both)."""
+    cos_i, cos_o = wi[2], wo[2]
+    if cos_i <= 0.0 or cos_o <= 0.0:
+        return ZERO3, 0.0
+    h, d, g1_i = _rough_coat(mat, wi, wo)
+    t_i = rough_transmittance(mat, cos_i)
+    coat, base = _rough_pdf_parts(d, g1_i, cos_i, cos_o, _spec_prob(1.0 - t_i, mat))
+    return _rough_f(mat, wi, wo, h, d, g1_i, t_i), coat + base
+
+
+@inlined
 def _roughplastic_pdf_parts(mat, wi, wo):
     """(coating, base) parts of roughplastic_pdf, lobe-selection probabilities included."""
     cos_i, cos_o = wi[2], wo[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
         return 0.0, 0.0
-    dist, alpha = int(mat[MAT_DIST]), mat[MAT_ALPHA]
     p_spec = roughplastic_spec_prob(mat, cos_i)
-    hx, hy, hz = wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]
-    n = math.sqrt(hx * hx + hy * hy + hz * hz)
-    h = (hx / n, hy / n, hz / n)
-    spec = mf_D(dist, alpha, h) * mf_G1(dist, alpha, wi, h) / (4.0 * cos_i)
-    return spec * p_spec, (1.0 - p_spec) * cos_o * INV_PI
+    h, d, g1_i = _rough_coat(mat, wi, wo)
+    return _rough_pdf_parts(d, g1_i, cos_i, cos_o, p_spec)
 
 
 @block
@@ -197,10 +229,9 @@ def roughplastic_sample(mat, wi, u_lobe, u1, u2):
         wo = reflect_m(wi, m)
     else:
         wo = square_to_cosine_hemisphere(u1, u2)
-    pdf = roughplastic_pdf(mat, wi, wo)
+    f, pdf = roughplastic_eval_pdf(mat, wi, wo)
     if not pdf > 0.0:
         return ZERO3, ZERO3, 0.0, False
-    f = roughplastic_eval(mat, wi, wo)
     inv = 1.0 / pdf
     return wo, (f[0] * inv, f[1] * inv, f[2] * inv), pdf, False
 

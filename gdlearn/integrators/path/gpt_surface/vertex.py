@@ -22,7 +22,7 @@ import math
 
 
 from gdlearn.kernels import layout as L
-from gdlearn.kernels.bsdf.dispatch import (bsdf_eval, bsdf_pdf, bsdf_sample, lobe_class, lobe_class_ratio,
+from gdlearn.kernels.bsdf.dispatch import (bsdf_eval_pdf, bsdf_sample, lobe_class, lobe_class_ratio,
                                            sampled_lobe_class, vertex_class)
 from gdlearn.kernels.pathclass import ALL_MASK
 from gdlearn.integrators.path.params import VB_SURFACE
@@ -173,14 +173,14 @@ def nee_at_vis(sa, em, q, nq, p, ng, ns, wi_world, mat, stack, vis):
     s, t = coordinate_system(ns)
     wi = to_local(wi_world, s, t, ns)
     wo = to_local(dl, s, t, ns)
-    f = bsdf_eval(mat, wi, wo)
+    f, pdf_b = bsdf_eval_pdf(mat, wi, wo)
     if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
         return ZERO3, vis
     if vis == VIS_UNKNOWN:
         vis = VIS_OCCLUDED if occluded(sa, p, ng, q, stack) else VIS_VISIBLE
     if vis == VIS_OCCLUDED:
         return ZERO3, vis
-    w = 1.0 if delta else power_heuristic(pdf_em, bsdf_pdf(mat, wi, wo))
+    w = 1.0 if delta else power_heuristic(pdf_em, pdf_b)
     return sc3(mul3(f, w_em), w), vis
 
 
@@ -239,8 +239,7 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
         if occluded(sa, p_o, get3(of, k, F_NG), x_next, stack):
             return ZERO3, False, 0, 0.0, False
         wo = to_local(w_b, s, t, ns_o)
-        f = bsdf_eval(mat_o, wi_o, wo)
-        pdf = bsdf_pdf(mat_o, wi_o, wo)
+        f, pdf = bsdf_eval_pdf(mat_o, wi_o, wo)
         _update(of, k, f, j_sa, pdf, pdf_b)
         return w_b, True, lobe_class(mat_o, False, cfg.threshold), pdf, False
     # Sec. 3.2, Eq. 15: half-vector copy
@@ -255,8 +254,7 @@ def shift_direction(sa, action, k, of, mat_o, bv, nx, cfg, stack):
         return ZERO3, False, 0, 0.0, False
     if cfg.broken == BROKEN_HV_JACOBIAN:
         j = 1.0
-    f = bsdf_eval(mat_o, wi_o, wo)
-    pdf = bsdf_pdf(mat_o, wi_o, wo)
+    f, pdf = bsdf_eval_pdf(mat_o, wi_o, wo)
     _update(of, k, f, j, pdf, pdf_b)
     return to_world(wo, s, t, ns_o), True, lobe_class(mat_o, False, cfg.threshold), pdf, False
 
@@ -328,8 +326,7 @@ def follow_base(sa, k, of, oi, bv, cfg):
         ns = get3(of, k, F_NS)
         s, t = coordinate_system(ns)
         wi_o = to_local(get3(of, k, F_WI), s, t, ns)
-        f = bsdf_eval(mat, wi_o, wo)
-        pdf_o = bsdf_pdf(mat, wi_o, wo)
+        f, pdf_o = bsdf_eval_pdf(mat, wi_o, wo)
         _update(of, k, f, 1.0, pdf_o, pdf)
         ok, lcls = relabel(of, k, mat, bv, to_world(wo, s, t, ns), lobe_class(mat, False, cfg.threshold), cfg)
         if not ok:
