@@ -52,25 +52,18 @@ def _sample_many(row, wi, u):
 
 
 @njit(cache=True)
-def _eval_pdf_many(row, wi, dirs):
+def _eval_pdf_many(row, wi, dirs, pair=False):
+    """f |cos wo| and pdf at each direction: by bsdf_eval and bsdf_pdf, or with ``pair`` by
+    bsdf_eval_pdf."""
     n = dirs.shape[0]
     f = np.zeros((n, 3))
     pdf = np.zeros(n)
     for i in range(n):
         wo = (dirs[i, 0], dirs[i, 1], dirs[i, 2])
-        f[i, 0], f[i, 1], f[i, 2] = B.bsdf_eval(row, wi, wo)
-        pdf[i] = B.bsdf_pdf(row, wi, wo)
-    return f, pdf
-
-
-@njit(cache=True)
-def _eval_pdf_pair_many(row, wi, dirs):
-    n = dirs.shape[0]
-    f = np.zeros((n, 3))
-    pdf = np.zeros(n)
-    for i in range(n):
-        wo = (dirs[i, 0], dirs[i, 1], dirs[i, 2])
-        ff, pdf[i] = B.bsdf_eval_pdf(row, wi, wo)
+        if pair:
+            ff, pdf[i] = B.bsdf_eval_pdf(row, wi, wo)
+        else:
+            ff, pdf[i] = B.bsdf_eval(row, wi, wo), B.bsdf_pdf(row, wi, wo)
         f[i, 0], f[i, 1], f[i, 2] = ff
     return f, pdf
 
@@ -139,7 +132,7 @@ def test_eval_pdf_is_eval_and_pdf_bit_for_bit(name, kw, ci):
     d = rng.normal(size=(3000, 3))
     dirs = np.vstack([d / np.linalg.norm(d, axis=1)[:, None], _samples(row, wi, 1, n=3000)[0]])
     f, pdf = _eval_pdf_many(row, wi, dirs)
-    f2, pdf2 = _eval_pdf_pair_many(row, wi, dirs)
+    f2, pdf2 = _eval_pdf_many(row, wi, dirs, True)
     assert np.any(pdf > 0) and np.array_equal(f, f2) and np.array_equal(pdf, pdf2)
 
 
