@@ -225,10 +225,6 @@ def bsdf_pdf(mat, wi, wo):
     return _pdf_front(mat, wi, wo)
 
 
-_eval_all_inlined = inlined(_eval_front_all)
-_pdf_all_inlined = inlined(_pdf_front_all)
-
-
 def _eval_pdf_lean(mat, wi, wo):
     if int(mat[L.MAT_TYPE]) == L.DIFFUSE:
         return diffuse_eval(mat, wi, wo), diffuse_pdf(mat, wi, wo)
@@ -236,15 +232,28 @@ def _eval_pdf_lean(mat, wi, wo):
 
 
 def _eval_pdf_glossy(mat, wi, wo):
-    if int(mat[L.MAT_TYPE]) == L.ROUGHPLASTIC:
+    # each family by name (not through the glossy eval and pdf bodies): those would type the rough
+    # plastic's separate eval and pdf too, two more functions to compile
+    t = int(mat[L.MAT_TYPE])
+    if t == L.DIFFUSE:
+        return diffuse_eval(mat, wi, wo), diffuse_pdf(mat, wi, wo)
+    if t == L.ROUGHCONDUCTOR:
+        return roughconductor_eval(mat, wi, wo), roughconductor_pdf(mat, wi, wo)
+    if t == L.ROUGHPLASTIC:
         return roughplastic_eval_pdf(mat, wi, wo)
-    return _eval_glossy_inlined(mat, wi, wo), _pdf_glossy_inlined(mat, wi, wo)
+    return ZERO3, 0.0
+
+
+_eval_pdf_glossy_inlined = inlined(_eval_pdf_glossy)
 
 
 def _eval_pdf_front_all(mat, wi, wo):
-    if int(mat[L.MAT_TYPE]) == L.ROUGHPLASTIC:
-        return roughplastic_eval_pdf(mat, wi, wo)
-    return _eval_all_inlined(mat, wi, wo), _pdf_all_inlined(mat, wi, wo)
+    t = int(mat[L.MAT_TYPE])
+    if t == L.ROUGHDIELECTRIC:
+        return roughdielectric_eval(mat, wi, wo), roughdielectric_pdf(mat, wi, wo)
+    if t == L.PLASTIC:
+        return plastic_eval(mat, wi, wo), plastic_pdf(mat, wi, wo)
+    return _eval_pdf_glossy_inlined(mat, wi, wo)
 
 
 def _eval_pdf_front(mat, wi, wo):
