@@ -18,7 +18,7 @@ them. The compile step stores the final geometric normal, so kernels never re-de
 import math
 
 
-from gdlearn.kernels.vec import dot, normalize, sub
+from gdlearn.kernels.vec import dot, fmax, normalize, sub
 from gdlearn.kernels.jit import inlined
 
 # --- primitive types (column INFO_TYPE) ----------------------------------------------------------
@@ -195,7 +195,7 @@ def offset_origin(p, ng, d):
     The push scales with the coordinates' magnitude (float64 rounding is relative), like pbrt's
     error-bound offset but with a fixed conservative bound (1e-9 relative, >= 1e-7 absolute).
     """
-    eps = 1e-9 * max(abs(p[0]), max(abs(p[1]), abs(p[2]))) + 1e-7
+    eps = 1e-9 * fmax(abs(p[0]), fmax(abs(p[1]), abs(p[2]))) + 1e-7     # selects: vectorisable
     if dot(d, ng) < 0.0:
         eps = -eps
     return (p[0] + eps * ng[0], p[1] + eps * ng[1], p[2] + eps * ng[2])

@@ -34,7 +34,7 @@ from gdlearn.integrators.path.packet_nee import defer_diffuse_area, nee_diffuse_
 from gdlearn.integrators.path.packet_rows import (IT_FX, IT_FY, IT_KEY, IT_S, Q_ALIVE, Q_CONT, Q_DELTA, Q_DEPTH,
                                                   Q_DIFF, Q_EMP, Q_H, Q_ITEM, Q_MAT, Q_NEE, R_BETA, R_C, R_ETA, R_FS,
                                                   R_FT, R_L, R_M2S, R_MREF, R_NG, R_NS, R_O, R_P, R_PP, R_PPDF, R_SO,
-                                                  R_UBSDF, R_UEM, R_URR, R_WI, R_WO, get3, set3, set_if)
+                                                  R_UBSDF, R_UEM, R_URR, R_WI, R_WO, get3, set3, set3_if, set_if)
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
 from gdlearn.kernels.accel.packet import PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
@@ -132,26 +132,13 @@ def next_diffuse(S, Q, rr_depth):
         go = (Q[Q_DIFF * PK + j] != 0) & valid
         w2 = -w2 if flip else w2
         b0, b1, b2 = S[R_BETA * PK + j] * r0, S[(R_BETA + 1) * PK + j] * r1, S[(R_BETA + 2) * PK + j] * r2
-        s0, s1, s2 = S[R_FS * PK + j], S[(R_FS + 1) * PK + j], S[(R_FS + 2) * PK + j]
-        t0, t1, t2 = S[R_FT * PK + j], S[(R_FT + 1) * PK + j], S[(R_FT + 2) * PK + j]
-        n0, n1, n2 = S[R_NS * PK + j], S[(R_NS + 1) * PK + j], S[(R_NS + 2) * PK + j]
-        d0 = s0 * w0 + t0 * w1 + n0 * w2
-        d1 = s1 * w0 + t1 * w1 + n1 * w2
-        d2 = s2 * w0 + t2 * w1 + n2 * w2
-        px, py, pz = S[R_P * PK + j], S[(R_P + 1) * PK + j], S[(R_P + 2) * PK + j]
-        gx, gy, gz = S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j]
-        eps = 1e-9 * fmax(abs(px), fmax(abs(py), abs(pz))) + 1e-7
-        eps = -eps if d0 * gx + d1 * gy + d2 * gz < 0.0 else eps
-        set_if(S, R_O, j, go, px + eps * gx)
-        set_if(S, R_O + 1, j, go, py + eps * gy)
-        set_if(S, R_O + 2, j, go, pz + eps * gz)
-        set_if(S, R_O + 3, j, go, d0)
-        set_if(S, R_O + 4, j, go, d1)
-        set_if(S, R_O + 5, j, go, d2)
+        d = to_world((w0, w1, w2), get3(S, R_FS, j), get3(S, R_FT, j), get3(S, R_NS, j))
+        p = get3(S, R_P, j)
+        o = offset_origin(p, get3(S, R_NG, j), d)
+        set3_if(S, R_O, j, go, o)
+        set3_if(S, R_O + 3, j, go, d)
         set_if(S, R_O + 6, j, go, math.inf)
-        set_if(S, R_PP, j, go, px)
-        set_if(S, R_PP + 1, j, go, py)
-        set_if(S, R_PP + 2, j, go, pz)
+        set3_if(S, R_PP, j, go, p)
         set_if(S, R_PPDF, j, go, pdf)
         Q[Q_DELTA * PK + j] = 0 if go else Q[Q_DELTA * PK + j]
         depth = Q[Q_DEPTH * PK + j] + 1

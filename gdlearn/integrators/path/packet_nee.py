@@ -18,18 +18,18 @@ lanes in SIMD".
 import math
 
 from gdlearn.integrators.path.packet_rows import (Q_EMP, Q_NEE, R_BETA, R_C, R_ENG, R_EP0, R_EPA, R_ERGB, R_M2S,
-                                                  R_MREF, R_NG, R_NS, R_P, R_SO, R_UEM, R_WI, set3,
-                                                  set_if)
+                                                  R_MREF, R_NG, R_NS, R_P, R_SO, R_UEM, R_WI, get3, set3,
+                                                  set3_if, set_if)
 from gdlearn.kernels.accel.packet import PK
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval_pdf
-from gdlearn.kernels.geometry import G_HASN, G_NG, INFO_TYPE, P_TRIANGLE
+from gdlearn.kernels.geometry import G_HASN, G_NG, INFO_TYPE, P_TRIANGLE, offset_origin
 from gdlearn.kernels.jit import ir_inline, leaf
 from gdlearn.kernels.layout import DIFFUSE, MAT_TYPE
 from gdlearn.kernels.lights import (E_AREA, EM_AREA, EM_COUNT, EM_FIRST, EM_RGB, EM_TYPE, pick_emitter, pick_prim,
                                     sample_emitter)
 from gdlearn.kernels.sampling import INV_PI, power_heuristic
 from gdlearn.kernels.scene_query import SHADOW_EPS, shadow_ray
-from gdlearn.kernels.vec import fmax, to_local
+from gdlearn.kernels.vec import to_local
 
 
 @ir_inline
@@ -124,13 +124,12 @@ def nee_diffuse_area(S, Q):
         w = 0.0 if not pdf > 0.0 else w
         ok = fast & (dist2 != 0.0) & (cos_q > 0.0) & ((fx != 0.0) | (fy != 0.0) | (fz != 0.0))
         # shadow_ray from the vertex pushed off its surface (offset_origin) to q
-        nx, ny, nz = S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j]
-        eps = 1e-9 * fmax(abs(px), fmax(abs(py), abs(pz))) + 1e-7
-        eps = -eps if vx * nx + vy * ny + vz * nz < 0.0 else eps
-        has_n = (nx != 0.0) | (ny != 0.0) | (nz != 0.0)
-        ox = px + eps * nx if has_n else px
-        oy = py + eps * ny if has_n else py
-        oz = pz + eps * nz if has_n else pz
+        ng = (S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j])
+        o = offset_origin((px, py, pz), ng, (vx, vy, vz))
+        has_n = (ng[0] != 0.0) | (ng[1] != 0.0) | (ng[2] != 0.0)
+        ox = o[0] if has_n else px
+        oy = o[1] if has_n else py
+        oz = o[2] if has_n else pz
         sx, sy, sz = qx - ox, qy - oy, qz - oz
         sdist = math.sqrt(sx * sx + sy * sy + sz * sz)
         sinv = 1.0 / sdist
@@ -138,14 +137,9 @@ def nee_diffuse_area(S, Q):
         c0 = fx * (S[R_ERGB * PK + j] * inv_pdf) * w
         c1 = fy * (S[(R_ERGB + 1) * PK + j] * inv_pdf) * w
         c2 = fz * (S[(R_ERGB + 2) * PK + j] * inv_pdf) * w
-        set_if(S, R_C, j, ok, S[R_BETA * PK + j] * c0)
-        set_if(S, R_C + 1, j, ok, S[(R_BETA + 1) * PK + j] * c1)
-        set_if(S, R_C + 2, j, ok, S[(R_BETA + 2) * PK + j] * c2)
-        set_if(S, R_SO, j, ok, ox)
-        set_if(S, R_SO + 1, j, ok, oy)
-        set_if(S, R_SO + 2, j, ok, oz)
-        set_if(S, R_SO + 3, j, ok, sx * sinv if sdist != 0.0 else 0.0)
-        set_if(S, R_SO + 4, j, ok, sy * sinv if sdist != 0.0 else 0.0)
-        set_if(S, R_SO + 5, j, ok, sz * sinv if sdist != 0.0 else 1.0)
+        beta = get3(S, R_BETA, j)
+        set3_if(S, R_C, j, ok, (beta[0] * c0, beta[1] * c1, beta[2] * c2))
+        set3_if(S, R_SO, j, ok, (ox, oy, oz))
+        set3_if(S, R_SO + 3, j, ok, (sx * sinv, sy * sinv, sz * sinv) if sdist != 0.0 else (0.0, 0.0, 1.0))
         set_if(S, R_SO + 6, j, ok, tmax if (sdist != 0.0) & (tmax > 0.0) else -1.0)
         Q[Q_NEE * PK + j] = 1 if ok else Q[Q_NEE * PK + j]

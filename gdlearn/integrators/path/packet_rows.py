@@ -77,3 +77,11 @@ def set_if(S, r, j, ok, v):
     """Row r of lane j becomes v where ``ok``, else stays: a select and a store, no branch (the SIMD
     loops over the lanes)."""
     S[r * PK + j] = v if ok else S[r * PK + j]
+
+
+@leaf
+def set3_if(S, r, j, ok, v):
+    """:func:`set_if` of rows r, r+1, r+2 (a 3-vector)."""
+    set_if(S, r, j, ok, v[0])
+    set_if(S, r + 1, j, ok, v[1])
+    set_if(S, r + 2, j, ok, v[2])
