@@ -177,7 +177,6 @@ def print_gradient_error(files, refs, a):
         recs = gradient_errors(methods, [sf], spp=a.grad_spp, seeds=range(100, 100 + a.seeds),
                                references=refs, spp_per_pass=max(1, a.grad_spp // 4))
         summ = summarize(recs)
-        rep = summ[("replay (gpt-replay)", name)]["mean"]
         for m in methods:
             s = summ[(m.label, name)]
             q, se = paired_ratio(recs, "replay (gpt-replay)", m.label, name)

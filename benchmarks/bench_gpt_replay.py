@@ -41,6 +41,7 @@ def time_per_pass(scene_file, spp, repeat, threads):
     times = {"pt": [], "gpt-replay": []}
     same = True
     stats = {}
+    primal = None
     for i in range(repeat):                    # interleaved: both see the same load
         for name, integ in (("pt", pt), ("gpt-replay", gpt)):
             t0 = time.perf_counter()

@@ -20,7 +20,6 @@ import re
 
 import pytest
 
-from conftest import notebook_chapters
 
 #: Words that name rendering / reconstruction algorithms (matched in function and class names).
 ALGORITHM_WORDS = re.compile(

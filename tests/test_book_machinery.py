@@ -1,7 +1,6 @@
 """The book's helpers: quick-mode budgets, the widgets' content and offline wiring, the build
 script's cache fingerprint."""
 import importlib.util
-import math
 from pathlib import Path
 
 import numpy as np

@@ -3,7 +3,6 @@ section scene's ray casting by hand, base paths that obey the specular laws, off
 what the policies say (shared vertices after a reconnection, copied half vectors, manifold chains
 that obey Snell's law and end on the base's light vertex), zero failures for a zero shift, and the
 tabulated Jacobian check. Every expected value is computed here, independently of the module."""
-import math
 
 import numpy as np
 import pytest

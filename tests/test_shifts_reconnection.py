@@ -79,7 +79,6 @@ def test_wrong_formula_is_rejected():
     rng = np.random.default_rng(3)
     surf, x_b, x_o, w0 = _random_configs(rng, 1, grazing=True)[0]
     y = trace(surf, x_b, w0)
-    n_y = surf.normal(y)
     fd = fd_jacobian(lambda u, v: (lambda yy: None if yy is None else (unit(yy - x_o),) * 2)(
         trace(surf, x_b, direction_chart(w0, u, v))))
     wrong = np.sum((y - x_b) ** 2) / np.sum((y - x_o) ** 2)

@@ -18,7 +18,6 @@ variance and blur both fall), and the image-mean bias below 1 % after the last p
 close-up, at radius 0.5 x the pixel footprint). A 3 % error in the photon normalisation, a lost
 bounce or a missing caustic path fails the 1 %.
 """
-import numpy as np
 import pytest
 import scipy.ndimage as nd
 

@@ -8,8 +8,6 @@
 """
 import math
 
-import numpy as np
-
 
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
 from gdlearn.kernels.geometry import offset_origin, surface

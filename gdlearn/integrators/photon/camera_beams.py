@@ -38,7 +38,7 @@ from gdlearn.kernels.media.medium import medium_params, transmittance
 from gdlearn.kernels.pathclass import pc_init, pc_push
 from gdlearn.kernels.vec import coordinate_system, to_local, to_world
 from gdlearn.kernels.jit import block
-from gdlearn.integrators.photon.gather import CONTINUE, GATHER, STOP, _leave, _plus, _wanted
+from gdlearn.integrators.photon.gather import GATHER, STOP, _leave, _plus, _wanted
 
 #: columns of a beam row: origin (3), direction (3), length, medium row, camera weight (3)
 BEAM_O, BEAM_D, BEAM_S, BEAM_MED, BEAM_W = 0, 3, 6, 7, 8

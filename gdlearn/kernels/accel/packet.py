@@ -26,7 +26,7 @@ import numpy as np
 
 
 from gdlearn.kernels.accel.bvh import _KEY_HIGH, _KEY_LOW, _NO_HIT, _f64_bits
-from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
+from gdlearn.kernels.accel.bvh_build import K_QUAD, LANES, ROW_LIM, ROW_META, WIDE
 from gdlearn.kernels.geometry import INFO_TYPE, P_SPHERE, intersect_disk, intersect_sphere
 from gdlearn.kernels.jit import leaf
 from gdlearn.kernels.vec import fmax, fmin

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gdlearn.teaching.figures.shifts import LIGHT, SPHERE, Section
+from gdlearn.teaching.figures.shifts import LIGHT, Section
 
 BASE_STYLE = dict(color="black", lw=1.4, marker="o", ms=3.5, zorder=3)
 OFFSET_STYLE = dict(color="tab:orange", lw=1.4, ls="--", marker="o", ms=3.5, zorder=4)

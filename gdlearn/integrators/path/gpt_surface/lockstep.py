@@ -49,11 +49,9 @@ from gdlearn.integrators.path.gpt_surface.vertex import (ALIVE, BROKEN_LOBE_CLAS
 from gdlearn.integrators.path.gpt_surface.mixed import shift_segment_mixed, unpaired
 from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                                          I_ALIVE, I_ESCAPED, I_MAT, I_PREV_DELTA, I_PRIM, I_RECONN,
-                                                         I_STATE, JOINED, MERGED, FREE, emitted, get3, mul3, nee_at,
-                                                         relabel, replayed_class, sc3, set3, shift_direction, vclass_of,
-                                                         _update)
+                                                         I_STATE, JOINED, MERGED, FREE, emitted, get3, mul3, relabel,
+                                                         replayed_class, sc3, set3, shift_direction, vclass_of)
 from gdlearn.shifts.policy import conn, decide
-from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_pdf
 from gdlearn.kernels.lights import E_AREA, E_POINT, E_SPOT, EM_TYPE, same_direction_point, sample_emitter
 from gdlearn.kernels.pathclass import pc_class, pc_init, pc_push
 from gdlearn.kernels.rng import path_state, rand_at

@@ -31,7 +31,7 @@ from gdlearn.kernels import geometry as G
 from gdlearn.kernels import layout as L
 from gdlearn.kernels.bsdf.dispatch import bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample, lobe_class, vertex_class
 from gdlearn.kernels.geometry import offset_origin
-from gdlearn.integrators.path.gpt_surface.vertex import (F_BETA, F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
+from gdlearn.integrators.path.gpt_surface.vertex import (F_NG, F_NS, F_POS, F_PREV_P, F_PREV_PDF, F_WI,
                                                          I_MAT, I_PENDING, I_PREV_DELTA, I_PRIM, I_RECONN, I_STATE,
                                                          JOINED, get3, same_delta_lobe, set3, _update)
 from gdlearn.shifts.policy import conn

@@ -34,8 +34,8 @@ from gdlearn.kernels.scene_query import occluded
 from gdlearn.kernels.vec import coordinate_system, dot, to_local, to_world
 from gdlearn.shifts.halfvector import halfvector_copy_mat
 from gdlearn.shifts.mis import mis_weight_from_log_ratio
-from gdlearn.shifts.policy import ESCAPED, SHIFT_HALFVECTOR, SHIFT_RECONNECT, SHIFT_REPLAY
-from gdlearn.shifts.reconnection import connectable, reconnect
+from gdlearn.shifts.policy import ESCAPED, SHIFT_RECONNECT, SHIFT_REPLAY
+from gdlearn.shifts.reconnection import reconnect
 from gdlearn.kernels.jit import leaf, noalloc
 
 ZERO3 = (0.0, 0.0, 0.0)
@@ -318,7 +318,7 @@ def start_weights(of, k):
 def follow_base(sa, k, of, oi, bv, cfg):
     """Offset k shares the base vertex x_b (``bv``): same outgoing direction (J = 1). A JOINED offset
     arrives from its own direction, so f and the density differ once more; a delta lobe cannot be followed."""
-    mat, weight, wo, pdf, delta, cls_b, p = bv.mat, bv.weight, bv.wo, bv.pdf, bv.delta, bv.cls_b, bv.x
+    mat, wo, pdf, delta, p = bv.mat, bv.wo, bv.pdf, bv.delta, bv.x
     if oi[k, I_RECONN] == JOINED:
         if delta:
             oi[k, I_ALIVE] = FAILED

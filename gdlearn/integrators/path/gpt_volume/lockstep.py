@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_is_null, bsdf_pdf, bsdf_sample,
+from gdlearn.kernels.bsdf.dispatch import (bsdf_eta, bsdf_eval, bsdf_is_delta_only, bsdf_pdf, bsdf_sample,
                                   lobe_class, sampled_lobe_class, vertex_class)
 from gdlearn.kernels.accel.bvh import STACK_SIZE
 from gdlearn.kernels.camera import camera_ray
