@@ -38,53 +38,62 @@ from gdlearn.integrators.base import PassResult, ProgressiveIntegrator
 from gdlearn.integrators.setup import SceneSetup
 from gdlearn.kernels.jit import block
 from gdlearn.kernels.pathclass import MEDIA_TRANSPORT, SURFACE_TRANSPORT
+from gdlearn.kernels.threads import next_rows, run_rows
 
 #: ``transport`` -> the effects-mask bit it sets (kernels.pathclass, "The camera's end")
 TRANSPORT = {"all": 0, "media": MEDIA_TRANSPORT, "surfaces": SURFACE_TRANSPORT}
-from gdlearn.kernels.threads import next_rows, run_rows
+
+
+def _one_path_rows(radiance):
+    """The row driver of the one-path-at-a-time kernels: ``radiance`` (``radiance_path_inline`` or
+    ``radiance_volpath_inline``) per sample. A factory, not a dispatcher argument: numba never
+    caches a kernel that takes a function as an argument (every process compiled it again, ~40 s),
+    and it does cache a closure over one (``kernels.jit._ClosureCache``)."""
+
+    @block(nogil=True)
+    def rows(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad, counter, step):
+        """One thread's share of a pass: chunks of ``step`` rows from ``counter``."""
+        sa = borrowed(sa)      # no atomic reference counts shared by the threads (kernels.arrays.borrowed)
+        h, w = out.shape[0], out.shape[1]
+        inv = 1.0 / spp
+        stack = np.empty(STACK_SIZE, dtype=np.int32)
+        while True:
+            y0, y1 = next_rows(counter, step, h)
+            if y0 == y1:
+                return
+            for y in range(y0, y1):
+                nbad = 0
+                for x in range(w):
+                    key = y * w + x
+                    a0 = 0.0
+                    a1 = 0.0
+                    a2 = 0.0
+                    for s in range(sample0, sample0 + spp):
+                        o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
+                        c = radiance(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                        if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
+                            a0 += c[0]
+                            a1 += c[1]
+                            a2 += c[2]
+                        else:
+                            nbad += 1
+                    out[y, x, 0] = a0 * inv
+                    out[y, x, 1] = a1 * inv
+                    out[y, x, 2] = a2 * inv
+                bad[y] = nbad
+
+    return rows
+
+
+_rows_path = _one_path_rows(radiance_path_inline)
+_rows_volpath = _one_path_rows(radiance_volpath_inline)
+
 
 def render_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
     """Surfaces only (Mitsuba ``path``): the mean radiance of samples sample0 .. sample0+spp-1 of
     every pixel into ``out`` (H x W x 3); ``bad[y]`` counts the non-finite samples dropped in row y."""
     run_rows(lambda counter, step: _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out,
                                               bad, counter, step), out.shape[0])
-
-
-# The surface and volume row loops below are twins on purpose: passing the radiance function as an
-# argument would merge them, but numba never caches a kernel that takes a dispatcher argument
-# (measured: every process recompiles it, ~40 s), and this loop is the hot, cached entry point.
-@block(nogil=True)
-def _rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad, counter, step):
-    """One thread's share of :func:`render_rows_path`: chunks of ``step`` rows from ``counter``."""
-    sa = borrowed(sa)      # no atomic reference counts shared by the threads (kernels.arrays.borrowed)
-    h, w = out.shape[0], out.shape[1]
-    inv = 1.0 / spp
-    stack = np.empty(STACK_SIZE, dtype=np.int32)
-    while True:
-        y0, y1 = next_rows(counter, step, h)
-        if y0 == y1:
-            return
-        for y in range(y0, y1):
-            nbad = 0
-            for x in range(w):
-                key = y * w + x
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for s in range(sample0, sample0 + spp):
-                    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                    c = radiance_path_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold,
-                                             stack)
-                    if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
-                        a0 += c[0]
-                        a1 += c[1]
-                        a2 += c[2]
-                    else:
-                        nbad += 1
-                out[y, x, 0] = a0 * inv
-                out[y, x, 1] = a1 * inv
-                out[y, x, 2] = a2 * inv
-            bad[y] = nbad
 
 
 def render_rows_packet(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad):
@@ -136,39 +145,6 @@ def render_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thres
     """As :func:`render_rows_path` with media (Mitsuba ``volpath``)."""
     run_rows(lambda counter, step: _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out,
                                                  bad, counter, step), out.shape[0])
-
-
-@block(nogil=True)
-def _rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, out, bad, counter, step):
-    sa = borrowed(sa)
-    h, w = out.shape[0], out.shape[1]
-    inv = 1.0 / spp
-    stack = np.empty(STACK_SIZE, dtype=np.int32)
-    while True:
-        y0, y1 = next_rows(counter, step, h)
-        if y0 == y1:
-            return
-        for y in range(y0, y1):
-            nbad = 0
-            for x in range(w):
-                key = y * w + x
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for s in range(sample0, sample0 + spp):
-                    o, d, tmax = camera_ray(sa.camera, x + rand(seed, key, s, 0), y + rand(seed, key, s, 1))
-                    c = radiance_volpath_inline(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold,
-                                                stack)
-                    if np.isfinite(c[0]) and np.isfinite(c[1]) and np.isfinite(c[2]):
-                        a0 += c[0]
-                        a1 += c[1]
-                        a2 += c[2]
-                    else:
-                        nbad += 1
-                out[y, x, 0] = a0 * inv
-                out[y, x, 1] = a1 * inv
-                out[y, x, 2] = a2 * inv
-            bad[y] = nbad
 
 
 class PathTracer(ProgressiveIntegrator):
