@@ -96,47 +96,6 @@ def replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshol
                      rr_min, out, counts, diag, want_diag)
 
 
-@rows
-def _replay_rows_path(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
-                     out, counts, diag, want_diag):
-    h, w = out.shape[1], out.shape[2]
-    inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        acc = np.zeros((5, 3))
-        cnt = counts[y]
-        for x in range(w):
-            key = y * w + x
-            acc[:] = 0.0
-            for s in range(sample0, sample0 + spp):
-                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                o, d, tmax = camera_ray(sa.camera, fx, fy)
-                base = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
-                if not _finite(base):
-                    cnt[3] += 1
-                    continue
-                _record(acc, 0, base, 1.0)
-                for k in range(4):
-                    q = shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
-                    if q == 0.0:
-                        continue
-                    ox, oy = offset_film_position(fx, fy, k)
-                    o, d, tmax = camera_ray(sa.camera, ox, oy)
-                    # same key: the base pixel's random numbers, replayed (Eq. 6-7)
-                    off = radiance_path(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
-                    if not _finite(off):
-                        cnt[3] += 1
-                        continue
-                    cnt[0] += 1
-                    _record(acc, 1 + k, (off[0] - base[0], off[1] - base[1], off[2] - base[2]), 1.0 / q)
-                    if want_diag:
-                        _diagnose(sa, diag, y, x, base, off, fx, fy, ox, oy, stack)
-            for j in range(5):
-                for c in range(3):
-                    out[j, y, x, c] = acc[j, c] * inv
-
-
 @block
 def replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
                      out, counts, diag, want_diag):
@@ -146,45 +105,57 @@ def replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, thres
                      rr_min, out, counts, diag, want_diag)
 
 
-@rows
-def _replay_rows_volpath(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min,
-                     out, counts, diag, want_diag):
-    h, w = out.shape[1], out.shape[2]
-    inv = 1.0 / spp
-    for row in prange(h):
-        y = np.int64(row)     # see kernels.jit: one type for the row index
-        stack = np.empty(STACK_SIZE, dtype=np.int32)
-        acc = np.zeros((5, 3))
-        cnt = counts[y]
-        for x in range(w):
-            key = y * w + x
-            acc[:] = 0.0
-            for s in range(sample0, sample0 + spp):
-                fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
-                o, d, tmax = camera_ray(sa.camera, fx, fy)
-                base = radiance_volpath(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
-                if not _finite(base):
-                    cnt[3] += 1
-                    continue
-                _record(acc, 0, base, 1.0)
-                for k in range(4):
-                    q = shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
-                    if q == 0.0:
-                        continue
-                    ox, oy = offset_film_position(fx, fy, k)
-                    o, d, tmax = camera_ray(sa.camera, ox, oy)
-                    off = radiance_volpath(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold,
-                                           stack)
-                    if not _finite(off):
+def _replay_rows(radiance):
+    """The parallel rows of :func:`replay_rows_path` (``radiance_path``) or
+    :func:`replay_rows_volpath` (``radiance_volpath``). A factory, not a dispatcher argument: numba
+    caches a closure over a compiled function (``kernels.jit._ClosureCache``), not a kernel that takes
+    one as an argument."""
+
+    @rows
+    def replay(sa, seed, sample0, spp, max_depth, rr_depth, mask, threshold, rr_threshold, rr_min, out, counts,
+               diag, want_diag):
+        h, w = out.shape[1], out.shape[2]
+        inv = 1.0 / spp
+        for row in prange(h):
+            y = np.int64(row)     # see kernels.jit: one type for the row index
+            stack = np.empty(STACK_SIZE, dtype=np.int32)
+            acc = np.zeros((5, 3))
+            cnt = counts[y]
+            for x in range(w):
+                key = y * w + x
+                acc[:] = 0.0
+                for s in range(sample0, sample0 + spp):
+                    fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
+                    o, d, tmax = camera_ray(sa.camera, fx, fy)
+                    base = radiance(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                    if not _finite(base):
                         cnt[3] += 1
                         continue
-                    cnt[0] += 1
-                    _record(acc, 1 + k, (off[0] - base[0], off[1] - base[1], off[2] - base[2]), 1.0 / q)
-                    if want_diag:
-                        _diagnose(sa, diag, y, x, base, off, fx, fy, ox, oy, stack)
-            for j in range(5):
-                for c in range(3):
-                    out[j, y, x, c] = acc[j, c] * inv
+                    _record(acc, 0, base, 1.0)
+                    for k in range(4):
+                        q = shift_q(x, y, k, w, h, base, seed, key, s, rr_threshold, rr_min, cnt)
+                        if q == 0.0:
+                            continue
+                        ox, oy = offset_film_position(fx, fy, k)
+                        o, d, tmax = camera_ray(sa.camera, ox, oy)
+                        # same key: the base pixel's random numbers, replayed (Eq. 6-7)
+                        off = radiance(sa, o, d, tmax, seed, key, s, max_depth, rr_depth, mask, threshold, stack)
+                        if not _finite(off):
+                            cnt[3] += 1
+                            continue
+                        cnt[0] += 1
+                        _record(acc, 1 + k, (off[0] - base[0], off[1] - base[1], off[2] - base[2]), 1.0 / q)
+                        if want_diag:
+                            _diagnose(sa, diag, y, x, base, off, fx, fy, ox, oy, stack)
+                for j in range(5):
+                    for c in range(3):
+                        out[j, y, x, c] = acc[j, c] * inv
+
+    return replay
+
+
+_replay_rows_path = _replay_rows(radiance_path)
+_replay_rows_volpath = _replay_rows(radiance_volpath)
 
 
 class ReplayGPT(ProgressiveIntegrator):
