@@ -25,7 +25,9 @@ a call per term. The MIS weight is Eq. 11 in ratio form, 1 / (1 + r) with r = p'
 numba has no cacheable way to pass a compiled function as an argument (a dispatcher argument makes
 the caller uncacheable and the callee recompile in every process), so :func:`make_shift_photons`
 builds one loop per shift as a closure over the two functions, which numba compiles as direct,
-inlinable calls and caches keyed by them.
+inlinable calls. The cache finds it again in the next process because ``kernels.jit._ClosureCache``
+keys it by those functions' names and code (numba's own key pickled them with a per-process uuid,
+and every process compiled the loop anew).
 """
 from __future__ import annotations
 
