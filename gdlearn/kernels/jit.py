@@ -135,11 +135,13 @@ class _ClosureCache(FunctionCache):
     Here a compiled function in a cell counts by :func:`_stable`'s identity."""
 
     def _index_key(self, sig, codegen):
-        key = super()._index_key(sig, codegen)
         if self._py_func.__closure__ is None:
-            return key
+            return super()._index_key(sig, codegen)
+        # numba's key (signature, target, hashes of the bytecode and of the cells), its cells stable;
+        # not through super(): that would pickle every captured dispatcher first, only to be replaced
         cells = tuple(_stable(c.cell_contents) for c in self._py_func.__closure__)
-        return key[:2] + ((key[2][0], hashlib.sha256(dumps(cells)).hexdigest()),)
+        code = hashlib.sha256(self._py_func.__code__.co_code).hexdigest()
+        return (sig, codegen.magic_tuple(), (code, hashlib.sha256(dumps(cells)).hexdigest()))
 
 
 def _compile(fn, opts):
