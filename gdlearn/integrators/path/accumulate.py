@@ -34,7 +34,8 @@ def add_sample(acc, c, d8):
 
 @leaf
 def store_means(out, y, x, acc, inv):
-    """out[:, y, x] = acc * inv: the pixel's per-pass means (L, D_k, S_k)."""
-    for j in range(9):
+    """out[:, y, x] = acc * inv: the pixel's per-pass means, one per row of ``acc`` (gpt's nine: L,
+    D_k, S_k; gpt-replay's five: L, D_k)."""
+    for j in range(acc.shape[0]):
         for ch in range(3):
             out[j, y, x, ch] = acc[j, ch] * inv

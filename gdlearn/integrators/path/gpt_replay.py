@@ -32,6 +32,7 @@ from gdlearn.kernels.accel.bvh import STACK_SIZE, closest_hit
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_SHAPE
 from gdlearn.kernels.rng import rand
+from gdlearn.integrators.path.accumulate import store_means
 from gdlearn.integrators.path.surface import radiance_path
 from gdlearn.integrators.path import packet as surface_packet
 from gdlearn.integrators.path import packet_volume as volume_packet
@@ -147,9 +148,7 @@ def _replay_rows(radiance):
                         _record(acc, 1 + k, (off[0] - base[0], off[1] - base[1], off[2] - base[2]), 1.0 / q)
                         if want_diag:
                             _diagnose(sa, diag, y, x, base, off, fx, fy, ox, oy, stack)
-                for j in range(5):
-                    for c in range(3):
-                        out[j, y, x, c] = acc[j, c] * inv
+                store_means(out, y, x, acc, inv)
 
     return replay
 

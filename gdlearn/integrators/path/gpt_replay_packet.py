@@ -14,6 +14,7 @@ samples in their order: the five buffers and the counters equal the one-path ker
 """
 import numpy as np
 
+from gdlearn.integrators.path.accumulate import store_means
 from gdlearn.integrators.path import packet_volume
 from gdlearn.integrators.path.packet import fill_pixel_items, trace_items
 from gdlearn.integrators.path.packet_rows import IT_FX, IT_FY, IT_KEY, IT_S, N_ITEMS, new_buffers
@@ -132,6 +133,4 @@ def _row(sa, y, seed, sample0, spp, max_depth, rr_depth, rr_threshold, rr_min, o
                 acc[x, 1 + k, c] += (obuf[3 * r + c] - buf[3 * i + c]) * scale
     inv = 1.0 / spp
     for x in range(w):
-        for j in range(5):
-            for c in range(3):
-                out[j, y, x, c] = acc[x, j, c] * inv
+        store_means(out, y, x, acc[x], inv)

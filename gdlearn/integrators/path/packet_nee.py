@@ -124,7 +124,7 @@ def nee_diffuse_area(S, Q):
         w = 0.0 if not pdf > 0.0 else w
         ok = fast & (dist2 != 0.0) & (cos_q > 0.0) & ((fx != 0.0) | (fy != 0.0) | (fz != 0.0))
         # shadow_ray from the vertex pushed off its surface (offset_origin) to q
-        ng = (S[R_NG * PK + j], S[(R_NG + 1) * PK + j], S[(R_NG + 2) * PK + j])
+        ng = get3(S, R_NG, j)
         o = offset_origin((px, py, pz), ng, (vx, vy, vz))
         has_n = (ng[0] != 0.0) | (ng[1] != 0.0) | (ng[2] != 0.0)
         ox = o[0] if has_n else px
