@@ -164,8 +164,10 @@ inlined = _recipe(forceinline=True)
 #: :func:`inlined`'s options, for an ``overload`` whose body numba picks by argument type
 INLINED_OPTIONS = dict({k: v for k, v in _BASE.items() if k != "nopython"}, forceinline=True)
 leaf = _recipe(forceinline=True, _nrt=False)
+#: :func:`leaf`'s options, for an ``overload`` whose body numba picks by argument type
+LEAF_OPTIONS = dict(INLINED_OPTIONS, _nrt=False)
 noalloc = _recipe(_nrt=False)
 ir_inline = _recipe(inline="always")
 rows = _recipe(parallel=True)
 
-__all__ = ["INLINED_OPTIONS", "block", "inlined", "leaf", "noalloc", "ir_inline", "rows"]
+__all__ = ["INLINED_OPTIONS", "LEAF_OPTIONS", "block", "inlined", "leaf", "noalloc", "ir_inline", "rows"]

@@ -28,6 +28,7 @@ of diffuse vertices run SIMD over the lanes too (:mod:`gdlearn.integrators.path.
 import math
 
 import numpy as np
+from numba.extending import overload
 
 
 from gdlearn.integrators.path.packet_nee import defer_diffuse_area, nee_diffuse_area, nee_lane
@@ -37,11 +38,12 @@ from gdlearn.integrators.path.packet_rows import (IT_FX, IT_FY, IT_KEY, IT_S, Q_
                                                   R_UBSDF, R_UEM, R_URR, R_WI, R_WO, get3, set3, set3_if, set_if)
 from gdlearn.integrators.path.surface import D_BSDF_U1, D_BSDF_U2, D_EM_SEL, D_EM_U1, D_EM_U2, D_LOBE, D_RR, dim
 from gdlearn.kernels.accel.bvh import any_hit_inline, closest_hit_inline
-from gdlearn.kernels.accel.packet import PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace
+from gdlearn.kernels.accel.forms import one_leaf
+from gdlearn.kernels.accel.packet import PK, Q_HIT, Q_PRIM, S_U, S_V, packet_trace_leaf
 from gdlearn.kernels.bsdf.dispatch import bsdf_eta, bsdf_is_delta_only, bsdf_sample
 from gdlearn.kernels.camera import camera_ray
 from gdlearn.kernels.geometry import INFO_EMITTER, INFO_MAT, offset_origin, surface
-from gdlearn.kernels.jit import ir_inline, leaf
+from gdlearn.kernels.jit import LEAF_OPTIONS, ir_inline, leaf
 from gdlearn.kernels.layout import DIFFUSE, MAT_R, MAT_TWOSIDED, MAT_TYPE, NULL
 from gdlearn.kernels.lights import emitter_pdf, eval_emitter
 from gdlearn.kernels.pathclass import (CAUSTICS, DIFFUSE_INTERREFLECTION, DIRECT_LIGHTING, EMISSION, GLOSSY,
@@ -258,12 +260,33 @@ def _shade_next(sa, S, Q, j, rr_depth):
     Q[Q_ALIVE * PK + j] = 1
 
 
-@leaf
 def _trace(sa, S, Q, ro, stack, any_hit):
     """The lanes' rays at row ro: as a packet when the tree is one leaf; else ray by ray with the
-    scalar traversal (incoherent rays through a tree share too few nodes for a packet to pay)."""
+    scalar traversal (incoherent rays through a tree share too few nodes for a packet to pay).
+    Compiled for the BVH's form (:mod:`gdlearn.kernels.accel.forms`): a one-leaf scene's kernels
+    hold the packet's leaf test alone."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_trace, jit_options=LEAF_OPTIONS)
+def _trace_typed(sa, S, Q, ro, stack, any_hit):
+    body = _trace_leaf if one_leaf(sa.types[sa.fields.index("node_info")]) else _trace_tree
+
+    def impl(sa, S, Q, ro, stack, any_hit):
+        body(sa, S, Q, ro, stack, any_hit)
+
+    return impl
+
+
+@leaf
+def _trace_leaf(sa, S, Q, ro, stack, any_hit):
+    packet_trace_leaf(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, ro, any_hit)
+
+
+@leaf
+def _trace_tree(sa, S, Q, ro, stack, any_hit):
     if sa.node_info[0, 1] > 0:
-        packet_trace(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, ro, stack, any_hit)
+        packet_trace_leaf(sa.nodes, sa.node_info, sa.prims, sa.prim_info, S, Q, ro, any_hit)
         return
     for j in range(PK):
         o, d, tmax = get3(S, ro, j), get3(S, ro + 3, j), S[(ro + 6) * PK + j]

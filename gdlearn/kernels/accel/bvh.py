@@ -28,6 +28,10 @@ cost as much as the traversal itself): its first ``DEPTH`` entries hold the keys
 doubles as float64 scratch where the vectorised leaf test leaves every lane's t, a, b: the nearest
 lane's values are then a load away instead of a dependent recomputation (~30 ns per closest hit on
 the Cornell box).
+
+A scene whose tree is one leaf (nine of the ten shipped scenes) is compiled without the tree
+traversal: :func:`closest_hit_inline` and :func:`any_hit_inline` pick their code by the BVH's
+*form*, the write flag of ``node_info`` (:mod:`gdlearn.kernels.accel.forms`).
 """
 import math
 
@@ -35,13 +39,14 @@ import numpy as np
 from llvmlite import ir as llvm_ir
 from numba import types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from gdlearn.kernels.accel.bvh_build import K_A_DIAG, K_B_DIAG, K_QUAD, LANES, ROW_LIM, ROW_META, WIDE, CHILD_MASK, STACK_KEYS, build, build_scene  # noqa: F401
 from gdlearn.kernels.geometry import INFO_MAT, INFO_TYPE, intersect_prim
 from gdlearn.kernels.accel.simd import block4, block8, children8, sort8
 from gdlearn.kernels.layout import MAT_TYPE, NULL
-from gdlearn.kernels.jit import inlined, leaf, noalloc
+from gdlearn.kernels.accel.forms import one_leaf
+from gdlearn.kernels.jit import LEAF_OPTIONS, inlined, leaf, noalloc
 from gdlearn.kernels.vec import fmax, fmin
 
 #: traversal stack entries: int64 child keys (two int32 entries each); a wide node pushes at most
@@ -242,14 +247,42 @@ def _leaf_closest(nodes, node_info, prims, prim_info, node, o, d, tmin, best, sc
     return best_t, best_p, best_u, best_v
 
 
-@leaf
 def closest_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """:func:`closest_hit` inlined into the caller by LLVM (the path tracers' hot loop: a call
-    passes four arrays as ~30 scalars, which costs more than a small scene's whole traversal)."""
+    passes four arrays as ~30 scalars, which costs more than a small scene's whole traversal).
+    Compiled for the BVH's form (:mod:`gdlearn.kernels.accel.forms`): a one-leaf scene's kernels
+    test the leaf and leave the tree traversal out."""
+    raise NotImplementedError("compiled code only: call closest_hit")
+
+
+@overload(closest_hit_inline, jit_options=LEAF_OPTIONS)
+def _closest_hit_typed(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+    body = _closest_hit_leaf if one_leaf(node_info) else _closest_hit_tree
+
+    def impl(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+        return body(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)
+
+    return impl
+
+
+@leaf
+def _closest_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+    """:func:`closest_hit_inline` when the whole tree is one leaf (small scenes)."""
     scratch = _scratch(stack)
     keep = scratch.shape[0] >= 3 * _SCRATCH     # False for a caller's short stack (then: recompute)
+    best = _leaf_closest(nodes, node_info, prims, prim_info, 0, o, d, tmin, (tmax, -1, 0.0, 0.0), scratch, keep)
+    if best[1] < 0:
+        return math.inf, -1, 0.0, 0.0
+    return best
+
+
+@leaf
+def _closest_hit_tree(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
+    """:func:`closest_hit_inline` for any tree (one leaf included, tested at run time)."""
+    scratch = _scratch(stack)
+    keep = scratch.shape[0] >= 3 * _SCRATCH
     best = (tmax, -1, 0.0, 0.0)
-    if node_info[0, 1] > 0:                     # the whole tree is one leaf (small scenes)
+    if node_info[0, 1] > 0:
         best = _leaf_closest(nodes, node_info, prims, prim_info, 0, o, d, tmin, best, scratch, keep)
     else:
         best = _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep)
@@ -310,9 +343,54 @@ def any_hit(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_nu
     return any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials)
 
 
-@leaf
 def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
-    """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`)."""
+    """:func:`any_hit` inlined into the caller by LLVM (see :func:`closest_hit_inline`), compiled
+    for the BVH's form as it is."""
+    raise NotImplementedError("compiled code only: call any_hit")
+
+
+@overload(any_hit_inline, jit_options=LEAF_OPTIONS)
+def _any_hit_typed(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
+    body = _any_hit_leaf if one_leaf(node_info) else _any_hit_tree
+
+    def impl(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
+        return body(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials)
+
+    return impl
+
+
+@leaf
+def _leaf_any(nodes, node_info, prims, prim_info, node, o, d, tmin, tmax, scratch, skip_null, materials):
+    """Index of some primitive of leaf ``node`` hit in (tmin, tmax), or -1 (see :func:`any_hit`)."""
+    first = node_info[node, 0]
+    ntri = node_info[node, 2]
+    ntri_done = 0
+    if ntri > 0 and not skip_null:
+        lanes = node_info[node, 4]
+        base = node_info[node, 3]
+        k = _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, False)   # any hit will do
+        if k >= 0:                       # the lane's first triangle (of a parallelogram: A)
+            n8 = np.uint64(((lanes + LANES - 1) >> 3) << 3)
+            return first + (int(nodes[np.uint64(base) + np.uint64(k) + np.uint64(ROW_META) * n8]) >> 3)
+        ntri_done = ntri
+    for i in range(first + ntri_done, first + node_info[node, 1]):
+        if skip_null and materials[prim_info[i, INFO_MAT], MAT_TYPE] == NULL:
+            continue
+        t, u, v = intersect_prim(prims, prim_info[i, INFO_TYPE], i, o, d, tmin, tmax)
+        if t < math.inf:
+            return i
+    return -1
+
+
+@leaf
+def _any_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
+    """:func:`any_hit_inline` when the whole tree is one leaf."""
+    return _leaf_any(nodes, node_info, prims, prim_info, 0, o, d, tmin, tmax, _scratch(stack), skip_null, materials)
+
+
+@leaf
+def _any_hit_tree(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
+    """:func:`any_hit_inline` for any tree: the children a ray enters, nearest first."""
     scratch = _scratch(stack)
     keys = _keys(stack)
     inv = (0.0, 0.0, 0.0)
@@ -321,28 +399,12 @@ def any_hit_inline(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, 
     sp = 0
     node = np.int64(0)
     while True:
-        first = node_info[node, 0]
-        count = node_info[node, 1]
-        if count > 0:
-            ntri = node_info[node, 2]
-            if ntri > 0 and not skip_null:
-                lanes = node_info[node, 4]
-                base = node_info[node, 3]
-                k = _leaf_lanes(nodes, base, lanes, o, d, tmin, tmax, scratch, False)   # any hit will do
-                if k >= 0:                       # the lane's first triangle (of a parallelogram: A)
-                    n8 = np.uint64(((lanes + LANES - 1) >> 3) << 3)
-                    return first + (int(nodes[np.uint64(base) + np.uint64(k) + np.uint64(ROW_META) * n8]) >> 3)
-                ntri_done = ntri
-            else:
-                ntri_done = 0
-            for i in range(first + ntri_done, first + count):
-                if skip_null and materials[prim_info[i, INFO_MAT], MAT_TYPE] == NULL:
-                    continue
-                t, u, v = intersect_prim(prims, prim_info[i, INFO_TYPE], i, o, d, tmin, tmax)
-                if t < math.inf:
-                    return i
+        if node_info[node, 1] > 0:
+            hit = _leaf_any(nodes, node_info, prims, prim_info, node, o, d, tmin, tmax, scratch, skip_null, materials)
+            if hit >= 0:
+                return hit
         else:
-            n, near, far = children8(nodes, np.int64(first), o, inv, tmin, tmax, keys, sp)
+            n, near, far = children8(nodes, np.int64(node_info[node, 0]), o, inv, tmin, tmax, keys, sp)
             if n > 0:
                 sp = _push_children(keys, sp, n, far)
                 node = near & _CHILD

@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from gdlearn.kernels.accel.forms import mark_form
 from gdlearn.kernels.geometry import P_TRIANGLE
 
 N_BINS = 12
@@ -206,7 +207,8 @@ def _wide_block(boxes, kids, row_of):
 def build_scene(rows, types, shape_of, lo, hi):
     """The traversal's arrays for primitive rows ``rows`` (geometry layout) of types ``types`` from
     shapes ``shape_of``, with boxes lo/hi: returns (order, nodes, node_info) -- apply ``order`` to
-    every per-primitive array (see :mod:`gdlearn.kernels.accel.bvh` for the layout)."""
+    every per-primitive array (see :mod:`gdlearn.kernels.accel.bvh` for the layout). ``node_info``
+    is read-only when the tree is one leaf (:mod:`gdlearn.kernels.accel.forms`)."""
     items = _items(rows, types, shape_of)
     ilo = np.array([lo[list(p)].min(0) for p, _ in items])
     ihi = np.array([hi[list(p)].max(0) for p, _ in items])
@@ -242,4 +244,4 @@ def build_scene(rows, types, shape_of, lo, hi):
         parts.append(block.reshape(-1))
         off += block.size
     nodes = np.concatenate(parts) if parts else np.zeros(0)
-    return order, np.ascontiguousarray(nodes), node_info
+    return order, np.ascontiguousarray(nodes), mark_form(node_info)

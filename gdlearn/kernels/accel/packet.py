@@ -161,18 +161,30 @@ def _box_any(nodes, b, S, Q, ro, any_hit):
 
 
 @leaf
-def packet_trace(nodes, node_info, prims, prim_info, S, Q, ro, stack, any_hit):
-    """Trace the packet's ray set at row ``ro`` (t in (0, tmax)). Closest hit: Q_PRIM (-1 on a miss)
-    and the hit's t (in the tmax row), S_U, S_V; ``any_hit``: Q_HIT is 1 for a blocked ray.
-    ``stack`` is the scalar traversal's (its first ``bvh.DEPTH`` entries, as int32 nodes)."""
+def _no_hits(Q, any_hit):
     for j in range(PK):
         if any_hit:
             Q[Q_HIT * PK + j] = 0
         else:
             Q[Q_PRIM * PK + j] = -1
+
+
+@leaf
+def packet_trace_leaf(nodes, node_info, prims, prim_info, S, Q, ro, any_hit):
+    """:func:`packet_trace` when the whole tree is one leaf (node 0): its lanes and primitives."""
+    _no_hits(Q, any_hit)
+    _leaf(nodes, node_info, prims, prim_info, 0, S, Q, ro, any_hit)
+
+
+@leaf
+def packet_trace(nodes, node_info, prims, prim_info, S, Q, ro, stack, any_hit):
+    """Trace the packet's ray set at row ``ro`` (t in (0, tmax)). Closest hit: Q_PRIM (-1 on a miss)
+    and the hit's t (in the tmax row), S_U, S_V; ``any_hit``: Q_HIT is 1 for a blocked ray.
+    ``stack`` is the scalar traversal's (its first ``bvh.DEPTH`` entries, as int32 nodes)."""
     if node_info[0, 1] > 0:                       # one leaf: no boxes
-        _leaf(nodes, node_info, prims, prim_info, 0, S, Q, ro, any_hit)
+        packet_trace_leaf(nodes, node_info, prims, prim_info, S, Q, ro, any_hit)
         return
+    _no_hits(Q, any_hit)
     for r in range(3):                            # the slab tests' reciprocal directions
         for j in range(PK):
             dr = S[(ro + 3 + r) * PK + j]
