@@ -376,9 +376,10 @@ def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad, counter, step
     stack = np.empty(STACK_SIZE, dtype=np.int32)
     of = np.zeros((4, NFV))
     oi = np.zeros((4, NIV), dtype=np.int64)
-    diff = np.zeros((4, 3))
-    summ = np.zeros((4, 3))
+    # the sample writes its gradient rows D_k and offset rows S_k straight into the rows of d8
+    # (views, not copies: a copy's shape check put numba's error formatting in the compile)
     d8 = np.zeros((8, 3))
+    diff, summ = d8[:4], d8[4:]
     acc = np.zeros((9, 3))
     while True:
         y0, y1 = next_rows(counter, step, h)
@@ -393,8 +394,6 @@ def _gpt_volume_rows(sa, seed, sample0, spp, cfg, out, stats, bad, counter, step
                     fx, fy = x + rand(seed, key, s, 0), y + rand(seed, key, s, 1)
                     c = gpt_volume_sample(sa, Pixel(fx, fy, x, y, w, h), PathRng(seed, key, s), cfg, of, oi,
                                           diff, summ, st, stack)
-                    d8[:4] = diff
-                    d8[4:] = summ
                     if not finite_sample(c, d8):
                         bad[y] += 1          # NaN / Inf never reach an image: drop the whole sample
                         continue
