@@ -279,13 +279,11 @@ def _closest_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stac
 @leaf
 def _closest_hit_tree(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack):
     """:func:`closest_hit_inline` for any tree (one leaf included, tested at run time)."""
+    if node_info[0, 1] > 0:
+        return _closest_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack)
     scratch = _scratch(stack)
     keep = scratch.shape[0] >= 3 * _SCRATCH
-    best = (tmax, -1, 0.0, 0.0)
-    if node_info[0, 1] > 0:
-        best = _leaf_closest(nodes, node_info, prims, prim_info, 0, o, d, tmin, best, scratch, keep)
-    else:
-        best = _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, best, stack, scratch, keep)
+    best = _tree_closest(nodes, node_info, prims, prim_info, o, d, tmin, (tmax, -1, 0.0, 0.0), stack, scratch, keep)
     if best[1] < 0:
         return math.inf, -1, 0.0, 0.0
     return best
@@ -391,11 +389,11 @@ def _any_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, s
 @leaf
 def _any_hit_tree(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials):
     """:func:`any_hit_inline` for any tree: the children a ray enters, nearest first."""
+    if node_info[0, 1] > 0:
+        return _any_hit_leaf(nodes, node_info, prims, prim_info, o, d, tmin, tmax, stack, skip_null, materials)
     scratch = _scratch(stack)
     keys = _keys(stack)
-    inv = (0.0, 0.0, 0.0)
-    if node_info[0, 1] == 0:          # a tree, not one leaf
-        inv = _inv_dir(d)
+    inv = _inv_dir(d)
     sp = 0
     node = np.int64(0)
     while True:
