@@ -117,6 +117,15 @@ def _moved(X, dX, lam, shapes, k, Xn):
 
 
 @inlined
+def _copy_chain(dst, src, k):
+    """dst[:k] = src[:k] for a (k x 3) chain, as a loop. A slice assignment compiles numba's
+    shape check with its error message's string formatting in every specialisation (about 5 s of
+    G-VPM's cold compile, benchmarks/README.md)."""
+    for j in range(k):
+        dst[j, 0], dst[j, 1], dst[j, 2] = src[j, 0], src[j, 1], src[j, 2]
+
+
+@inlined
 def _norm2(a, m):
     s = 0.0
     for i in range(m):
@@ -167,8 +176,9 @@ def manifold_walk(x0, xe, X, shapes, etas, refract, targets, k, max_iter, max_ha
             lam *= 0.5                      # step halving on rejection
         if not accepted:
             return False, it + 1, r
-        X[:] = Xn
-        C[:] = Cn
+        _copy_chain(X, Xn, k)                # rows k.. of Xn are X's: a copy of X never written there
+        for i in range(m):
+            C[i] = Cn[i]
         r = _max_abs(C, m)
     if relax is not None:
         if r >= tol and _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xn):
@@ -182,7 +192,7 @@ def _relaxed(x0, X, xe, relax, shapes, etas, refract, targets, k, Xt):
     xg, rr = relax
     if not (rr > 0.0 and relaxed_accept(x0, X, xe, xg, rr, shapes, etas, refract, targets, k, Xt)):
         return False
-    X[:] = Xt
+    _copy_chain(X, Xt, k)
     return True
 
 
@@ -295,7 +305,7 @@ def manifold_shift(x_b, x_b_offset, X_base, x_c, n_c, shapes, etas, refract, k, 
     targets = np.empty((k, 2))
     if not half_vector_targets(x_b, X_base, x_c, shapes, etas, refract, k, targets):
         return 0.0, False, 0
-    X_out[:k] = X_base[:k]
+    _copy_chain(X_out, X_base, k)
     Xo = X_out[:k]
     ok, iters, _ = manifold_walk(x_b_offset, x_c, Xo, shapes, etas, refract, targets, k,
                                  max_iter, MAX_HALVINGS, TOL, None)
