@@ -1,6 +1,7 @@
 """The BVH's form (kernels.accel.forms): a one-leaf scene's node table is read-only, and the
 traversals compiled for it test the leaf alone -- with the hits of the code for any tree."""
 import math
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -24,6 +25,25 @@ def test_only_a_one_leaf_tree_gets_the_read_only_table():
     assert not _scene("volume-caustic").node_info.flags.writeable
     mesh = _scene("mesh")
     assert mesh.node_info[0, 1] == 0 and mesh.node_info.flags.writeable      # a tree
+
+
+# (node_info writable, materials writable): between them both flags are read-only and writable once
+@pytest.mark.parametrize("name, flags", [("cornell-box", (False, False)), ("mesh", (True, False)),
+                                         ("glossy-box", (False, True))])
+def test_a_pickled_scene_keeps_the_forms_it_compiles_for(name, flags):
+    """numpy unpickles arrays writable; SceneArrays puts the write flags back, since they name what
+    the kernels compile (the BVH's form, the material table's tier), and the arrays themselves."""
+    sa = _scene(name)
+    back = pickle.loads(pickle.dumps(sa))
+    assert type(back) is type(sa)
+    for field, a, b in zip(sa._fields, sa, back):
+        if isinstance(a, np.ndarray):
+            assert b.flags.writeable == a.flags.writeable, field
+            assert b.flags.f_contiguous == a.flags.f_contiguous, field       # the tier's memory order
+            np.testing.assert_array_equal(a, b)
+        else:
+            assert a == b, field
+    assert (sa.node_info.flags.writeable, sa.materials.flags.writeable) == flags
 
 
 @pytest.mark.parametrize("name", ["cornell-box", "volume-caustic"])

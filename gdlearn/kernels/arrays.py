@@ -43,6 +43,21 @@ class SceneArrays(NamedTuple):
     def height(self) -> int:
         return int(self.camera[CAM_H])
 
+    def __reduce__(self):
+        # numpy unpickles every array writable, and the write flags name what the kernels compile
+        # (the BVH's form, accel.forms; the material table's tier, bsdf.tiers): without them a
+        # copy sent to another process would compile the tree traversal and every BSDF family
+        flags = tuple(isinstance(v, np.ndarray) and v.flags.writeable for v in self)
+        return _unpickled, (tuple(self), flags)
+
+
+def _unpickled(values: tuple, writeable: tuple) -> SceneArrays:
+    """A pickled :class:`SceneArrays` with its arrays' write flags as they were."""
+    for v, w in zip(values, writeable):
+        if isinstance(v, np.ndarray) and not w:
+            v.flags.writeable = False
+    return SceneArrays(*values)
+
 
 # ------------------------------------------------------------------------------ borrowed arrays
 # Every numba array carries a reference count (its "meminfo") that compiled code increments and
