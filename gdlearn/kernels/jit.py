@@ -80,6 +80,12 @@ owner is freed under the views, and another thread's rows reuse the memory. The 
 borrows a row's scratch stays a call of its own, so the owners live until it returns
 (``gbre_gather._pixels``).
 
+Copy arrays with loops, not slice assignments (``a[:k] = b[:k]``, ``X[:] = Y``): each one compiles
+numba's shape check, whose error message is built with f-strings and ``str.join``, in every
+specialisation around it. Filling with a scalar (``a[:] = 0.0``) has no shape to check. gpt's volume
+rows lost 43 compiled functions that way, and G-VPM's manifold walk 48 and ~25 s of its cold
+compile (benchmarks/README.md, "One leaf, compiled as one leaf" and "The manifold walk's copies").
+
 Each decorator works bare (``@leaf``) and with extra numba options (``@block(fastmath=True)``).
 """
 from __future__ import annotations

@@ -119,8 +119,8 @@ def _moved(X, dX, lam, shapes, k, Xn):
 @inlined
 def _copy_chain(dst, src, k):
     """dst[:k] = src[:k] for a (k x 3) chain, as a loop. A slice assignment compiles numba's
-    shape check with its error message's string formatting in every specialisation (about 5 s of
-    G-VPM's cold compile, benchmarks/README.md)."""
+    shape check with its error message's string formatting in every specialisation (kernels.jit:
+    ~25 s of G-VPM's cold compile)."""
     for j in range(k):
         dst[j, 0], dst[j, 1], dst[j, 2] = src[j, 0], src[j, 1], src[j, 2]
 
