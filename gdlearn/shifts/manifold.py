@@ -248,8 +248,7 @@ def predicted_walk(x0, X, xe, ne, xe_new, S, shapes, etas, refract, targets, k, 
     ok, it, r = manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL, relax)
     if ok or it > 0 or r < math.inf:
         return ok, it, r
-    for j in range(k):                      # the predicted start is invalid: the plain walk
-        Xo[j, 0], Xo[j, 1], Xo[j, 2] = X[j, 0], X[j, 1], X[j, 2]
+    _copy_chain(Xo, X, k)                   # the predicted start is invalid: the plain walk
     return manifold_walk(x0, xe_new, Xo, shapes, etas, refract, targets, k, MAX_ITER, MAX_HALVINGS, TOL, relax)
 
 
