@@ -9,7 +9,7 @@ median time of a pass after the first, the ratio, the stage split and the photon
         [--kernels 3d,2d] [--res 64] [--photons 20000] [--repeats 3] [--threads 2]
 
 ``--kernel``: the camera pass alone, the fast kernel (gbre_gather.gbre_rows) against the one it
-replaced (tests/_gbre_reference.py, kept for tests/test_gbre_fast.py) on the same photons and radius
+replaced (tests/_gbre_reference.py, which records tests/golden/passes/) on the same photons and radius
 (pass 1 after pass 0), interleaved (old, new, old, ...) in one process, ``--repeats`` times per scene
 and kernel (3D: mixed shift; 2D: the ray-frame copy; photon subsets on); prints the median and the
 minimum of each, their ratio, whether the buffers are equal, and the load average before and after.

@@ -29,7 +29,7 @@ the passes each run completed. This chose gpm's default ``radius_scale`` (gpm.RA
         --methods sppm,gpm+l1 --res 128 --seeds 3 --scenes scenes/cornell-box.xml
 
 ``--kernel``: the camera pass alone, the fast kernel (gpm_gather.gpm_rows) against the one it replaced
-(tests/_gpm_reference.py, kept for tests/test_gpm_fast.py) on the same photons and radii (pass 1 after
+(tests/_gpm_reference.py, which records tests/golden/passes/) on the same photons and radii (pass 1 after
 pass 0's radius reduction), interleaved (old, new, old, ...) in one process, ``--repeats`` times; prints
 the median and the minimum of each, their ratio and the load average before and after.
 

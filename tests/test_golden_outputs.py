@@ -1,13 +1,9 @@
 """Every integrator's buffers on every shipped scene match the arrays recorded in ``tests/golden/``
 (see ``tests/golden/record.py`` for the configurations and when to re-record).
 
-Counters and integer buffers must be identical. Floating-point buffers must agree to 1e-12 of the
-buffer's largest value. That is a rounding-level gate: numba compiles for the host CPU, and a
-machine with AVX-512 and FMA vectorises and contracts a few sums differently from one with AVX2
-(the recording machine and the CI machine differ by one ulp, 5.6e-17, on Cornell-box pixels of
-order 1e-2). A refactoring that changes one random number, one sample's weight or one bounce
-moves pixels by 1e-4 or more of the scale, eight orders of magnitude above the gate. A change
-meant to alter results re-records the arrays in the same commit and says why.
+Counters and integer buffers must be identical, floating-point buffers equal to 1e-12 of the
+buffer's largest value (``tests/golden/gate.py`` says why not bit for bit). A change meant to alter
+results re-records the arrays in the same commit and says why.
 """
 import sys
 from pathlib import Path
@@ -17,24 +13,9 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "golden"))
 import record  # noqa: E402
+from gate import mismatch  # noqa: E402
 
 CONFIGS = list(record.configurations())
-#: relative to the buffer's largest |value|; see the module docstring for why not exact
-ROUNDING = 1e-12
-
-
-def mismatch(want: np.ndarray, got: np.ndarray) -> str | None:
-    """Why ``got`` does not reproduce ``want`` (None when it does)."""
-    if want.shape != got.shape or want.dtype.kind != got.dtype.kind:
-        return f"shape/dtype {want.shape} {want.dtype} vs {got.shape} {got.dtype}"
-    if want.dtype.kind != "f":
-        return None if np.array_equal(want, got) else "integer values differ"
-    if not np.array_equal(np.isfinite(want), np.isfinite(got)):
-        return "non-finite entries differ"
-    fin = np.isfinite(want)
-    diff = np.max(np.abs(want[fin] - got[fin]), initial=0.0)
-    scale = np.max(np.abs(want[fin]), initial=0.0)
-    return None if diff <= ROUNDING * scale else f"max |diff| {diff:.3g} at scale {scale:.3g}"
 
 
 def test_the_gate_sees_one_changed_sample():

@@ -24,11 +24,11 @@ Organisation (for speed; benchmarks/README.md, GPM section): the per-photon loop
 :mod:`gdlearn.integrators.photon.photon_shift_loop`'s, shared with the surface part of the volumetric
 full images: the pixel's nine photon buffers and its shift counts are summed in a row scratch term by
 term in photon order and written once -- the same additions in the same order as one write per term,
-so every buffer is bit for bit that of the straightforward kernel (tests/test_gpm_fast.py against
-tests/_gpm_reference.py); a photon's parent is re-evaluated towards the base direction once for its
-four shifts (:func:`photon_base`: ``gpm_light.parent_base``), each shift evaluating only the offset
-direction (``parent_offset``); the shift, its projection and its reversibility check are inlined
-into the photon loop.
+so every buffer is bit for bit that of the straightforward kernel (tests/_gpm_reference.py, whose
+buffers tests/golden/passes.py records and tests/test_gpm_fast.py compares); a photon's parent is
+re-evaluated towards the base direction once for its four shifts (:func:`photon_base`:
+``gpm_light.parent_base``), each shift evaluating only the offset direction (``parent_offset``);
+the shift, its projection and its reversibility check are inlined into the photon loop.
 
 The offset photon must lie within the base gather point's radius of the offset gather point
 (PHOTONS.md Sec. 2.6); the density query is made only around the base gather point (Sec. 1.4).

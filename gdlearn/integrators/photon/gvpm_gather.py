@@ -33,11 +33,11 @@ Per pixel and half (camera sample 2 i + hh of pass i, as :mod:`gdlearn.integrato
 Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample's photons are
 collected once (row and base term, per-row scratch), then shifted photon by photon to the four
 neighbours, D_k, S_k and counts summed in a row scratch in photon order -- the buffers are bit for
-bit those of one write per photon and shift (tests/test_gvpm_fast.py against
-tests/_gvpm_reference.py) --; a photon's recorded edge a -> b is walked once for the four
-neighbours (``gvpm_light.base_edge``), and so is the specular chain above it built once
-(``photon_manifold.volume_chain``); the offset camera paths are traced only for a camera sample
-whose distance samples find a photon.
+bit those of one write per photon and shift (tests/_gvpm_reference.py, recorded by
+tests/golden/passes.py, compared by tests/test_gvpm_fast.py) --; a photon's recorded edge a -> b
+is walked once for the four neighbours (``gvpm_light.base_edge``), and so is the specular chain
+above it built once (``photon_manifold.volume_chain``); the offset camera paths are traced only for
+a camera sample whose distance samples find a photon.
 
 Buffers (:mod:`gdlearn.integrators.gradients`), per half and base pixel: L (index 0), D_k (1 + k),
 S_k (5 + k), k = right, left, down, up, each without the kernel's 1 / V(R) (the caller divides, as
