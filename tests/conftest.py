@@ -66,14 +66,35 @@ def notebook_chapters() -> list[Path]:
 BOOK_FILES = ("tests/test_book_build.py", "tests/test_book_chapters.py")
 
 
+#: Files handed out right after the book, in this order. Most of the suite's time is numba compiling
+#: kernels, once per scene form, into the cache every process shares (GDLEARN_CACHE). The book runs
+#: its chapters in name order: pt's and gpt's first, the photon estimators' last (gradient-photons,
+#: gradient-volume-photons, ~8 of its 15 min cold). While it compiles the first, the other worker
+#: compiles the photon estimators' kernels on the same scenes, so the book finds them in the cache;
+#: the path tracers' tests, after these, find what the book compiled. In name order both workers
+#: compiled pt and gpt at once, then both the photon kernels.
+EARLY_FILES = ("tests/test_gpm_fast.py", "tests/test_gvol_surface_fast.py", "tests/test_gvpm_fast.py",
+               "tests/test_gbre_fast.py", "tests/test_gpm.py", "tests/test_sppm.py", "tests/test_gvpm.py",
+               "tests/test_gbre.py", "tests/test_volume_estimates.py", "tests/test_vpm_bre_cli.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The book's files first, then :data:`EARLY_FILES`, then the rest in name order (a stable sort:
+    tests keep their order within a file). Under xdist every worker sorts alike, and the scheduler
+    below hands the files out in this order."""
+    rank = {f: i for i, f in enumerate(BOOK_FILES + EARLY_FILES)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::", 1)[0], len(rank)))
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """pytest-xdist's ``--dist loadfile`` (pyproject.toml's addopts), with the two book files as one
-    work unit handed out first (it is the longest: ~11 min of the suite's ~26 on one core).
+    work unit handed out first (it is the longest: 15 of the suite's 32 min on one worker, this
+    session's 2-core machine, 2026-12-07).
 
     Files stay whole so that a module-scoped fixture (a render several tests check) runs once, not
-    once per worker. Work units go out in collection order -- the book's first -- instead of xdist's
-    default of the most tests first."""
+    once per worker. Work units go out in collection order (:func:`pytest_collection_modifyitems`)
+    instead of xdist's default of the most tests first."""
     if config.getvalue("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
