@@ -3,7 +3,7 @@ a time, its four shifts and their buffer writes one after the other through non-
 neighbour's reconnection walking the photon's recorded edge a -> b again, ``gvpm_light.reconnect``):
 the straightforward reading of Gruson et al. 2018, Sec. 5.1 and Eq. 19, kept here as the reference
 the fast kernel must reproduce bit for bit (recorded by tests/golden/passes.py, compared by
-tests/test_gbre_fast.py). The whole module is copied
+tests/test_photon_fast_passes.py). The whole module is copied
 (shift_3d / shift_2d included); the camera paths, the BRE's kernel, the photon shifts and the
 light-path helpers are the package's own (the rewrite leaves their arithmetic unchanged)."""
 from __future__ import annotations

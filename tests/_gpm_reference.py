@@ -1,12 +1,12 @@
-"""The GPM camera pass as it was before it was made fast (gpm_gather at main 6e8a905: one photon at
-a time, its four shifts one after the other, each a call of ``shift_photon`` that re-evaluates the
+"""The GPM camera pass as it was before it was made fast (gpm_gather at main 6e8a905: one photon at a
+time, its four shifts one after the other, each a call of ``shift_photon`` that re-evaluates the
 base parent, and a buffer write per term): the straightforward reading of Hua et al. 2017, Sec. 4
 and Eq. 11, kept here as the reference the fast kernel must reproduce bit for bit
-(tests/golden/passes.py records its buffers; tests/test_gpm_fast.py compares). The per-photon
-loops and the shift itself are copied; the camera paths, the projection and the manifold walk are
-the package's own helpers (gpm_light), whose results the rewrite leaves unchanged; the parent's
-re-evaluation (gpm_light.parent_factor, since split into a base half computed once per photon and
-an offset half) is copied as it was."""
+(tests/golden/passes.py records its buffers, tests/test_photon_fast_passes.py compares). The
+per-photon loops and the shift itself are copied; the camera paths, the projection and the manifold
+walk are the package's own helpers (gpm_light), whose results the rewrite leaves unchanged; the
+parent's re-evaluation (gpm_light.parent_factor, since split into a base half computed once per
+photon and an offset half) is copied as it was."""
 import math
 
 import numpy as np

@@ -3,7 +3,7 @@ as it was before it shared GPM's fast photon loop: one photon at a time, its fou
 the other, each a call of ``shift_surface_photon`` that finds the photon's parent, re-evaluates it
 towards the base direction and walks the recorded edge again, and a buffer write per term. Kept as
 the reference the shared loop must reproduce (recorded by tests/golden/passes.py, compared by
-tests/test_gvol_surface_fast.py). The row loop, the
+tests/test_photon_fast_passes.py). The row loop, the
 per-photon loop and the light half of the shift are copied (with the helpers they took from
 gpm_gather and gvpm_light); the camera paths, the walk through null interfaces, the medium segments
 and the manifold walk are the package's own (camera_beams, gvol_surface_light.walk_to_surface and

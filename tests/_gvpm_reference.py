@@ -1,10 +1,10 @@
-"""The G-VPM camera pass as it was before it was made fast (gvpm_gather at commit 6d8e429: one photon at a
-time, its four shifts and their buffer writes one after the other; the reconnection walking the
+"""The G-VPM camera pass as it was before it was made fast (gvpm_gather at commit 6d8e429: one photon
+at a time, its four shifts and their buffer writes one after the other; the reconnection walking the
 recorded edge a -> b again for every neighbour): the straightforward reading of Gruson et al. 2018,
-Sec. 4 and Eq. 19, kept here as the reference the fast kernel must reproduce bit for bit
-(recorded by tests/golden/passes.py, compared by tests/test_gvpm_fast.py). Only the per-photon
-loops are copied; the camera paths, the distance copy and the light-path helpers are the package's
-own (their results are unchanged by the rewrite)."""
+Sec. 4 and Eq. 19, kept here as the reference the fast kernel must reproduce bit for bit (recorded
+by tests/golden/passes.py, compared by tests/test_photon_fast_passes.py). Only the per-photon loops
+are copied; the camera paths, the distance copy and the light-path helpers are the package's own
+(their results are unchanged by the rewrite)."""
 import math
 
 import numpy as np

@@ -73,8 +73,7 @@ BOOK_FILES = ("tests/test_book_build.py", "tests/test_book_chapters.py")
 #: compiles the photon estimators' kernels on the same scenes, so the book finds them in the cache;
 #: the path tracers' tests, after these, find what the book compiled. In name order both workers
 #: compiled pt and gpt at once, then both the photon kernels.
-EARLY_FILES = ("tests/test_gpm_fast.py", "tests/test_gvol_surface_fast.py", "tests/test_gvpm_fast.py",
-               "tests/test_gbre_fast.py", "tests/test_gpm.py", "tests/test_sppm.py", "tests/test_gvpm.py",
+EARLY_FILES = ("tests/test_photon_fast_passes.py", "tests/test_gpm.py", "tests/test_sppm.py", "tests/test_gvpm.py",
                "tests/test_gbre.py", "tests/test_volume_estimates.py", "tests/test_vpm_bre_cli.py")
 
 

@@ -6,8 +6,9 @@ Each fast pass -- GPM's (``gpm_gather.gpm_rows``), the volumetric full images' s
 it replaced, kept in ``tests/_*_reference.py``: one photon at a time, four calls of the shift, a
 buffer write per term. The arrays in ``tests/golden/passes/`` are the *reference* kernels'
 buffers, recorded by this script on the same photons and radii the fast kernel then gathers;
-``tests/test_{gpm,gvol_surface,gvpm,gbre}_fast.py`` run the fast kernel and apply the gate of
-``tests/test_golden_outputs.py`` (counts identical, floating point to 1e-12 of a buffer's scale).
+``tests/test_photon_fast_passes.py`` runs the fast kernel and applies ``tests/golden/gate.py``
+(counts identical, floating point to 1e-12 of a buffer's scale). On the recording machine the fast
+kernels reproduced the recordings bit for bit (2026-12-07).
 
 Recorded, not compared live: compiling the four reference kernels took about 8 minutes of the
 suite's two workers (2026-12-07), for kernels that never change. Re-record when a change is meant

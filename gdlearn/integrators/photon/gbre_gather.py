@@ -46,7 +46,7 @@ reconnects; a pixel half's L, D_k, S_k and shift counts are summed in a row scra
 same order as one write per term) and written once; the per-photon helpers are inlined; a camera
 sample's offset camera paths are traced when its first photon is found. The buffers are bit for
 bit those of the straightforward kernel (tests/_gbre_reference.py, whose buffers
-tests/golden/passes.py records and tests/test_gbre_fast.py compares).
+tests/golden/passes.py records and tests/test_photon_fast_passes.py compares).
 
 Buffers as G-VPM's (:class:`gdlearn.integrators.photon.gvpm_gather.GvpmOut`): L, D_k, S_k with the
 kernel included, ``m`` the base photons, ``count`` the shifts null / mixed / reconnected / failed /

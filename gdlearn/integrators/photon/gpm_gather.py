@@ -25,7 +25,7 @@ Organisation (for speed; benchmarks/README.md, GPM section): the per-photon loop
 full images: the pixel's nine photon buffers and its shift counts are summed in a row scratch term by
 term in photon order and written once -- the same additions in the same order as one write per term,
 so every buffer is bit for bit that of the straightforward kernel (tests/_gpm_reference.py, whose
-buffers tests/golden/passes.py records and tests/test_gpm_fast.py compares); a photon's parent is
+buffers tests/golden/passes.py records and tests/test_photon_fast_passes.py compares); a photon's parent is
 re-evaluated towards the base direction once for its four shifts (:func:`photon_base`:
 ``gpm_light.parent_base``), each shift evaluating only the offset direction (``parent_offset``);
 the shift, its projection and its reversibility check are inlined into the photon loop.

@@ -33,7 +33,7 @@ buffer *is* VPM's surface estimate and emission, :mod:`gdlearn.integrators.photo
    loop (:mod:`gdlearn.integrators.photon.photon_shift_loop`): the photon's parent, its base half
    and its recorded edge's media once per photon for the four neighbours, the pixel's buffers summed
    in a row scratch in photon order and written once (bit for bit the straightforward loop's,
-   tests/test_gvol_surface_fast.py).
+   tests/test_photon_fast_passes.py).
 4. **Emission** seen by the camera paths: the replayed pair, balance weight 1/2 each way (as GPM).
 """
 from __future__ import annotations

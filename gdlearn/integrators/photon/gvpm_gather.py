@@ -34,7 +34,7 @@ Organisation (for speed; benchmarks/README.md, G-VPM section): a distance sample
 collected once (row and base term, per-row scratch), then shifted photon by photon to the four
 neighbours, D_k, S_k and counts summed in a row scratch in photon order -- the buffers are bit for
 bit those of one write per photon and shift (tests/_gvpm_reference.py, recorded by
-tests/golden/passes.py, compared by tests/test_gvpm_fast.py) --; a photon's recorded edge a -> b
+tests/golden/passes.py, compared by tests/test_photon_fast_passes.py) --; a photon's recorded edge a -> b
 is walked once for the four neighbours (``gvpm_light.base_edge``), and so is the specular chain
 above it built once (``photon_manifold.volume_chain``); the offset camera paths are traced only for
 a camera sample whose distance samples find a photon.

@@ -17,7 +17,7 @@ functions (:func:`make_shift_photons`):
 The loop sums the pixel's nine buffers (L, D_k, S_k; :mod:`gdlearn.integrators.gradients`) in a row
 scratch term by term in photon order and writes them once, and counts the shifts in integers: the
 same additions in the same order as a buffer write per term, so the buffers are those of the
-straightforward loop bit for bit (tests/test_gpm_fast.py, tests/test_gvol_surface_fast.py) without
+straightforward loop bit for bit (tests/test_photon_fast_passes.py) without
 a call per term. The MIS weight is Eq. 11 in ratio form, 1 / (1 + r) with r = p' ``|J|`` / p
 (:func:`gdlearn.shifts.mis.mis_weight_from_log_ratio`); a failed shift has weight 1 and no offset
 (Hua et al. 2017, Sec. 4.3).
