@@ -20,10 +20,13 @@ same commit, and say why. The reference kernels must still run then: that is whe
 """
 from __future__ import annotations
 
+import importlib
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from gate import mismatch       # tests/golden/ is on the path: this script's folder, or the test's insert
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -47,8 +50,7 @@ def cases(family: str | None = None) -> list[tuple[str, str, str, dict]]:
 def check(stem: str, family: str, scene: str, options: dict) -> dict[str, np.ndarray]:
     """Run the fast kernel on a recorded case and assert it reproduces the recording (the gate of
     tests/golden/gate.py, every buffer). Returns the recording, for the caller's coverage checks."""
-    from gate import mismatch
-    want = load(stem)
+    want = recorded(stem)
     got = run(family, scene, options)
     assert sorted(got) == sorted(want), "a buffer appeared or disappeared"
     for name, w in want.items():
@@ -138,20 +140,23 @@ def _gbre(scene: str, which: str, **kw):
 
 def _reference(family: str):
     """The reference kernel's module, tests/_<family>_reference.py (compiled only to record)."""
-    sys.path.insert(0, str(HERE.parent))
-    import importlib
+    if str(HERE.parent) not in sys.path:
+        sys.path.insert(0, str(HERE.parent))
     return importlib.import_module(f"_{family}_reference")
+
+
+PASSES = {"gpm": _gpm, "gvol_surface": _gvol_surface, "gvpm": _gvpm, "gbre": _gbre}
 
 
 def run(family: str, scene: str, options: dict, which: str = "fast") -> dict[str, np.ndarray]:
     """The buffers of one pass by the ``"fast"`` kernel or the ``"reference"`` one (``which``), by field
     name."""
-    passes = {"gpm": _gpm, "gvol_surface": _gvol_surface, "gvpm": _gvpm, "gbre": _gbre}
-    out = passes[family](scene, which, **options)
+    out = PASSES[family](scene, which, **options)
     return dict(zip(out._fields, out))
 
 
-def load(stem: str) -> dict[str, np.ndarray]:
+def recorded(stem: str) -> dict[str, np.ndarray]:
+    """The recording of case ``stem``, by field name."""
     with np.load(OUT / f"{stem}.npz") as z:
         return {k: z[k] for k in z.files}
 
